@@ -1,0 +1,91 @@
+"""``python -m unps.fit``: normals, depth and albedo of one subject.
+
+    python -m unps.fit                                  # embedded analytic subject
+    python -m unps.fit subject=diligent subject.root=…/pmsData/ballPNG method=woodham
+    python -m unps.fit subject=folder subject.root=~/captures/mug
+    python -m unps.fit -m method=woodham,rpca subject=diligent subject.root=…
+
+Outputs land in Hydra's run folder (``hydra.run.dir=…`` moves it); see
+:func:`unps.io.outputs.write_fit_outputs`.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import hydra
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import MissingMandatoryValue
+
+from unps.errors import InputError
+from unps.geometry import integrate_normals
+from unps.metrics import angular_error, normal_metrics
+
+log = logging.getLogger("unps.fit")
+
+
+def build(node: DictConfig) -> tuple[str, Any]:
+    """Instantiate a config-group node; its ``name`` labels it and is not passed to the target."""
+    spec = OmegaConf.to_container(node, resolve=True)
+    name = spec.pop("name")
+    return name, instantiate(spec)
+
+
+def fit(cfg: DictConfig) -> dict:
+    """Run one method on one subject and write every output into ``cfg.paths.output_dir``.
+
+    The subject is read and validated and the lights resolved before anything is written.
+
+    Returns:
+        The metrics also written to ``metrics.json``.
+    """
+    from lightning import seed_everything
+
+    from unps.io.outputs import write_fit_outputs
+
+    seed_everything(cfg.seed, workers=True, verbose=False)
+    out = Path(cfg.paths.output_dir)
+    start = time.perf_counter()
+    subject = instantiate(cfg.subject)
+    light_name, light_source = build(cfg.light)
+    lights = light_source(subject)
+    method_name, method = build(cfg.method)
+    h, w = subject.resolution
+    log.info("%s: %d images, %d×%d pixels (%d on the object), read in %.1f s; lights: %s; "
+             "method: %s", subject.name, subject.n_images, w, h, subject.mask.sum(),
+             time.perf_counter() - start, light_name, method_name)
+
+    start = time.perf_counter()
+    estimate = method(subject, lights.directions)
+    depth = integrate_normals(estimate.normals, subject.mask)
+    runtime = time.perf_counter() - start
+
+    metrics = {"subject": subject.name, "method": method_name, "light": light_name,
+               "runtime_s": runtime, "n_images": subject.n_images, "resolution": [h, w]}
+    error = None
+    if subject.normals is not None:
+        error = angular_error(estimate.normals, subject.normals)
+        metrics.update(normal_metrics(estimate.normals, subject.normals, subject.mask))
+        log.info("normal error: mean %.2f°, median %.2f°, %.1f%% under 11.25° (%.2f s)",
+                 metrics["normal_mae"], metrics["normal_median"], 100 * metrics["acc_11_25"],
+                 runtime)
+    write_fit_outputs(out, subject, estimate, depth, lights, metrics, error)
+    return metrics
+
+
+@hydra.main(version_base="1.3", config_path="pkg://unps.conf", config_name="fit")
+def main(cfg: DictConfig) -> None:
+    try:
+        fit(cfg)
+    except (InputError, MissingMandatoryValue) as e:
+        log.error("%s", e)
+        sys.exit(2)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,102 @@
+"""Surfaces from normals: depth by least squares on the gradient field (supplementary Eq. 1), meshes.
+
+Frame: x right (+col), y up (−row), z toward the camera; orthographic projection with one
+unit per pixel of the grid.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+from scipy.sparse.linalg import spsolve
+
+from unps.data.subject import Frame
+
+
+def integrate_normals(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Depth whose gradient best agrees with the normals, min_D ‖∇D − Ĝ‖² over the mask.
+
+    Each pair of neighbouring object pixels gives one equation, written with the surface
+    orientation constraint rather than the gradient itself so that steep pixels (n_z → 0) do
+    not blow up: the step t between them must be orthogonal to their mean normal n̄,
+    n̄ · t = 0. Along +col, t = (1, 0, Δz): n̄_z Δz = −n̄_x. Along +row (one pixel down, y − 1),
+    t = (0, −1, Δz): n̄_z Δz = n̄_y. The sparse normal equations are solved exactly; each
+    connected part of the mask gets zero mean depth (depth is known up to an offset).
+
+    Args:
+        normals: (H, W, 3) unit normals.
+        mask: (H, W) bool.
+
+    Returns:
+        (H, W) float32 depth along +z in pixel units, NaN off the mask.
+    """
+    h, w = mask.shape
+    index = -np.ones((h, w), dtype=np.int64)
+    index[mask] = np.arange(mask.sum())
+    n = normals.astype(np.float64)
+    rows, cols, rhs, weights = [], [], [], []
+    for (dr, dc), sign in (((0, 1), -1.0), ((1, 0), 1.0)):   # sign: −n_x along col, +n_y along row
+        a = index[: h - dr, : w - dc]
+        b = index[dr:, dc:]
+        ok = (a >= 0) & (b >= 0)
+        mean = (n[: h - dr, : w - dc] + n[dr:, dc:])[ok] / 2
+        component = mean[:, 0] if dc else mean[:, 1]
+        rows.append(a[ok])
+        cols.append(b[ok])
+        weights.append(mean[:, 2])
+        rhs.append(sign * component)
+    first, second = np.concatenate(rows), np.concatenate(cols)
+    nz, target = np.concatenate(weights), np.concatenate(rhs)
+    m, e = int(mask.sum()), first.size
+    eq = np.arange(e)
+    a = sp.csr_matrix((np.concatenate([nz, -nz]), (np.concatenate([eq, eq]),
+                                                    np.concatenate([second, first]))), shape=(e, m))
+    _, part = connected_components(sp.csr_matrix((np.ones(e), (first, second)), shape=(m, m)),
+                                   directed=False)
+    anchors = np.unique(part, return_index=True)[1]    # one pinned pixel per connected part
+    pin = sp.csr_matrix((np.ones(anchors.size), (anchors, anchors)), shape=(m, m))
+    z = spsolve((a.T @ a + pin).tocsc(), a.T @ target)
+    z -= (np.bincount(part, weights=z) / np.bincount(part))[part]
+    depth = np.full((h, w), np.nan, np.float32)
+    depth[mask] = z
+    return depth
+
+
+def depth_to_mesh(depth: np.ndarray, mask: np.ndarray, frame: Frame | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Triangulate a depth map over the mask.
+
+    Every 2×2 block of object pixels gives two triangles, a block with three gives one;
+    triangles wind counter-clockwise seen from the camera, so their normals face +z.
+
+    Args:
+        depth: (H, W) depth in pixel units.
+        mask: (H, W) bool.
+        frame: if given, vertices are placed in the source image's pixel coordinates
+            (x = col, y = −row, z scaled by the downsampling step), so meshes of crops and
+            downsampled runs line up with full-resolution ones.
+
+    Returns:
+        vertices (V, 3) float32 in the unps frame, faces (F, 3) int32 indices.
+    """
+    h, w = mask.shape
+    index = -np.ones((h, w), dtype=np.int64)
+    index[mask] = np.arange(mask.sum())
+    r, c = np.nonzero(mask)
+    z = depth[mask].astype(np.float64)
+    if frame is not None:
+        r, c = frame.source_coords(r, c)
+        z = z * frame.step
+    vertices = np.stack([c, -r, z], axis=1).astype(np.float32)
+    # Corners of each block in counter-clockwise order seen from +z: (0,0) (1,0) (1,1) (0,1).
+    corners = np.stack([index[:-1, :-1], index[1:, :-1], index[1:, 1:], index[:-1, 1:]], -1)
+    corners = corners.reshape(-1, 4)
+    present = corners >= 0
+    full = corners[present.all(1)]
+    faces = [full[:, [0, 1, 2]], full[:, [0, 2, 3]]]
+    three = corners[present.sum(1) == 3]
+    if len(three):
+        keep = three >= 0
+        faces.append(three[keep].reshape(-1, 3))   # the three present corners, still in cyclic order
+    return vertices, np.concatenate(faces).astype(np.int32)

@@ -1,0 +1,67 @@
+"""Everything a fit leaves in its run folder; ``metrics.json`` is written last."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from unps.data.subject import Subject
+from unps.geometry import depth_to_mesh
+from unps.io.files import atomic_path, write_json, write_npy
+from unps.io.images import write_png8
+from unps.io.mesh import write_ply
+from unps.io.pictures import albedo_rgb, error_figure_png, error_rgb, normal_rgb
+from unps.lights import Lights, write_lights
+from unps.solvers.woodham import Estimate
+
+log = logging.getLogger(__name__)
+
+
+def write_fit_outputs(out: Path, subject: Subject, estimate: Estimate, depth: np.ndarray,
+                      lights: Lights, metrics: dict, error: np.ndarray | None) -> None:
+    """Write normals, albedo, depth, mesh, error map, lights, TensorBoard and metrics.json.
+
+    Every file is written atomically and ``metrics.json`` comes last, so its presence means
+    the run finished.
+
+    Args:
+        out: the run folder.
+        estimate: (H, W, 3) normals and albedo on the subject's grid.
+        depth: (H, W) depth in pixel units, NaN off the mask.
+        error: (H, W) angular error in degrees, when ground truth exists.
+    """
+    mask = subject.mask
+    write_npy(out / "normals.npy", estimate.normals)
+    write_png8(out / "normals.png", normal_rgb(estimate.normals, mask))
+    write_npy(out / "albedo.npy", estimate.albedo)
+    albedo_image, albedo_scale = albedo_rgb(estimate.albedo, mask)
+    write_png8(out / "albedo.png", albedo_image)
+    write_npy(out / "depth.npy", depth)
+    vertices, faces = depth_to_mesh(depth, mask, subject.frame)
+    write_ply(out / "mesh.ply", vertices, faces, normals=estimate.normals[mask])
+    write_lights(out / "lights.txt", lights)
+    if error is not None:
+        title = (f"{subject.name}: mean {metrics['normal_mae']:.2f}°, "
+                 f"median {metrics['normal_median']:.2f}°")
+        with atomic_path(out / "error.png") as tmp:
+            tmp.write_bytes(error_figure_png(error, mask, title))
+    _write_tensorboard(out / "tensorboard", subject, estimate, albedo_image, metrics, error)
+    write_json(out / "metrics.json", {**metrics, "albedo_png_scale": albedo_scale,
+                                      "frame": subject.frame.to_dict()})
+    log.info("outputs written to %s", out)
+
+
+def _write_tensorboard(folder: Path, subject: Subject, estimate: Estimate,
+                       albedo_image: np.ndarray, metrics: dict, error: np.ndarray | None) -> None:
+    from torch.utils.tensorboard import SummaryWriter
+
+    with SummaryWriter(str(folder)) as writer:
+        for key, value in metrics.items():
+            if isinstance(value, (int, float)) and not isinstance(value, bool):
+                writer.add_scalar(f"fit/{key}", value, 0)
+        writer.add_image("normals", normal_rgb(estimate.normals, subject.mask), 0, dataformats="HWC")
+        writer.add_image("albedo", albedo_image, 0, dataformats="HWC")
+        if error is not None:
+            writer.add_image("error_0_45deg", error_rgb(error, subject.mask), 0, dataformats="HWC")

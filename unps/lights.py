@@ -1,0 +1,46 @@
+"""Where a fit's lights come from (the ``light=`` config group)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from unps.data.subject import Subject
+from unps.errors import InputError
+from unps.io.files import atomic_path
+
+
+@dataclass(frozen=True)
+class Lights:
+    """The lights a method uses.
+
+    Attributes:
+        directions: (n, 3) float32 unit, surface to light, unps frame.
+        intensities: (n, 3) float32 RGB, or None when the images are used as given.
+        source: how they were obtained (``gt``, ``estimated``, …).
+    """
+
+    directions: np.ndarray
+    intensities: np.ndarray | None
+    source: str
+
+
+def ground_truth(subject: Subject) -> Lights:
+    """The subject's own calibrated lights (``light=gt``)."""
+    if not subject.calibrated:
+        raise InputError(f"subject {subject.name!r} has no light directions, so light=gt cannot "
+                         f"be used: put a light_directions.txt (n×3, one row per image) in its "
+                         f"folder")
+    return Lights(subject.light_directions, subject.light_intensities, "gt")
+
+
+def write_lights(path, lights: Lights) -> None:
+    """Write lights as text, one image per row: ``lx ly lz e_r e_g e_b``, atomically."""
+    intensities = lights.intensities
+    if intensities is None:
+        intensities = np.ones_like(lights.directions)
+    header = (f"lights used ({lights.source}); one row per image: lx ly lz (unit, surface to "
+              f"light; x right, y up, z toward the camera) e_r e_g e_b (RGB intensity)")
+    with atomic_path(path) as tmp:
+        np.savetxt(tmp, np.hstack([lights.directions, intensities]), fmt="%.6f", header=header)
