@@ -30,7 +30,11 @@ log = logging.getLogger("unps.fit")
 
 
 def build(node: DictConfig) -> tuple[str, Any]:
-    """Instantiate a config-group node; its ``name`` labels it and is not passed to the target."""
+    """Instantiate a config-group node; its ``name`` labels it and is not passed to the target.
+
+    Nodes are partial (``_partial_: true``): the callable they give raises its own errors
+    when called, rather than Hydra's wrapped instantiation error.
+    """
     spec = OmegaConf.to_container(node, resolve=True)
     name = spec.pop("name")
     return name, instantiate(spec)
@@ -51,7 +55,7 @@ def fit(cfg: DictConfig) -> dict:
     seed_everything(cfg.seed, workers=True, verbose=False)
     out = Path(cfg.paths.output_dir)
     start = time.perf_counter()
-    subject = instantiate(cfg.subject)
+    subject = instantiate(cfg.subject, _partial_=True)()   # called here so errors reach the user
     light_name, light_source = build(cfg.light)
     lights = light_source(subject)
     method_name, method = build(cfg.method)

@@ -46,8 +46,7 @@ def error_figure_png(error_deg: np.ndarray, mask: np.ndarray, title: str,
     h, w = mask.shape
     shown = np.ma.masked_where(~mask, error_deg)
     fig, ax = plt.subplots(figsize=(4 + 4 * w / max(h, w), 4 * h / max(h, w) + 0.6), dpi=150)
-    cmap = matplotlib.colormaps["viridis"].copy()
-    cmap.set_bad("black")
+    cmap = matplotlib.colormaps["viridis"].with_extremes(bad="black")
     im = ax.imshow(shown, cmap=cmap, vmin=0, vmax=vmax, interpolation="nearest")
     ax.set_title(title, fontsize=9)
     ax.set_axis_off()

@@ -58,8 +58,8 @@ def rgb_albedo(images: np.ndarray, normals: np.ndarray, light_directions: np.nda
     Returns:
         (m, 3) albedo.
     """
-    shading = np.maximum(light_directions.astype(np.float64) @ normals.T, 0)     # (n, m)
-    num = np.einsum("nm,nmc->mc", shading, images.astype(np.float64))
+    shading = np.maximum(light_directions.astype(np.float32) @ normals.T.astype(np.float32), 0)
+    num = np.einsum("nm,nmc->mc", shading, images.astype(np.float32, copy=False), optimize=True)
     return num / np.maximum((shading ** 2).sum(0), 1e-12)[:, None]
 
 

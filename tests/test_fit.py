@@ -1,0 +1,86 @@
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_module
+
+from unps.data.analytic import render_lambertian
+from unps.data.diligent import write_diligent
+from unps.errors import InputError
+from unps.fit import fit
+
+OUTPUTS = {"metrics.json", "normals.npy", "normals.png", "albedo.npy", "albedo.png", "depth.npy",
+           "mesh.ply", "error.png", "lights.txt", "tensorboard"}
+
+
+def config(tmp_path, *overrides):
+    with initialize_config_module(config_module="unps.conf", version_base="1.3"):
+        return compose("fit", overrides=[f"paths.output_dir={tmp_path}", *overrides])
+
+
+@pytest.mark.parametrize("method", ["woodham", "rpca"])
+def test_fit_writes_every_output(tmp_path, method):
+    metrics = fit(config(tmp_path, f"method={method}", "subject.size=32"))
+    assert OUTPUTS <= {p.name for p in tmp_path.iterdir()}
+    saved = json.loads((tmp_path / "metrics.json").read_text())
+    assert saved["method"] == method and saved["light"] == "gt" and saved["n_images"] == 32
+    assert saved["resolution"] == [32, 32]
+    for key in ("normal_mae", "normal_median", "acc_11_25", "acc_30", "acc_45", "runtime_s"):
+        assert np.isfinite(saved[key]) and saved[key] == pytest.approx(metrics[key])
+    assert saved["normal_mae"] < 10
+    normals = np.load(tmp_path / "normals.npy")
+    assert normals.shape == (32, 32, 3)
+    lights = np.loadtxt(tmp_path / "lights.txt")
+    assert lights.shape == (32, 6)
+    assert list((tmp_path / "tensorboard").glob("events.out.tfevents.*"))
+
+
+def test_fit_on_a_diligent_folder_with_crop_and_downsample(tmp_path):
+    write_diligent(render_lambertian("bumps", size=40, n_lights=16, seed=5), tmp_path / "objPNG")
+    out = tmp_path / "run"
+    metrics = fit(config(out, "subject=diligent", f"subject.root={tmp_path / 'objPNG'}",
+                         "subject.crop_margin=2", "subject.downsample=2", "method=woodham"))
+    assert metrics["subject"] == "lambertian-bumps"
+    saved = json.loads((out / "metrics.json").read_text())
+    assert saved["frame"]["step"] == 2 and saved["frame"]["top"] > 0
+    assert np.load(out / "depth.npy").shape == tuple(saved["resolution"])
+
+
+def test_uncalibrated_folder_with_light_gt_fails_before_writing(tmp_path):
+    folder = tmp_path / "photos"
+    write_diligent(render_lambertian(size=16, n_lights=4), folder)
+    (folder / "light_directions.txt").unlink()
+    out = tmp_path / "run"
+    with pytest.raises(InputError, match="has no light directions, so light=gt cannot be used"):
+        fit(config(out, "subject=folder", f"subject.root={folder}"))
+    assert not out.exists()
+
+
+def run_cli(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "unps.fit", *args], cwd=cwd, capture_output=True,
+                          text=True, timeout=300)
+
+
+def test_cli_runs_from_any_folder_and_reports_bad_input(tmp_path):
+    done = run_cli("subject.size=24", f"hydra.run.dir={tmp_path / 'run'}", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "run" / "metrics.json").is_file()
+
+    bad = run_cli("subject=diligent", f"subject.root={tmp_path / 'nowhere'}",
+                  f"hydra.run.dir={tmp_path / 'bad'}", cwd=tmp_path)
+    assert bad.returncode == 2
+    assert "nowhere: not a folder" in bad.stdout + bad.stderr
+    assert "Traceback" not in bad.stdout + bad.stderr
+    assert not (tmp_path / "bad" / "metrics.json").exists()
+
+
+def test_cli_multirun_sweeps_methods(tmp_path):
+    done = run_cli("-m", "method=woodham,rpca", "subject.size=24",
+                   f"hydra.sweep.dir={tmp_path / 'sweep'}", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    methods = sorted(json.loads(p.read_text())["method"]
+                     for p in (tmp_path / "sweep").glob("*/metrics.json"))
+    assert methods == ["rpca", "woodham"]

@@ -1,0 +1,204 @@
+import json
+import logging
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+import scipy.io
+
+from unps.data.diligent import read_diligent, read_folder, write_diligent
+from unps.data.subject import Subject
+from unps.errors import InputError
+from unps.io.files import atomic_path
+from unps.io.images import read_image, read_mask, srgb_to_linear
+
+
+def test_16_bit_png_is_read_at_full_depth(tmp_path):
+    levels = np.arange(0, 65536, 257 * 3, dtype=np.uint16)[:84].reshape(4, 7, 3)
+    levels[0, 0] = [1, 2, 65535]             # values an 8-bit reader cannot tell apart
+    cv2.imwrite(str(tmp_path / "a.png"), levels[..., ::-1])
+    rgb = read_image(tmp_path / "a.png")
+    np.testing.assert_array_equal(rgb, levels.astype(np.float32) / 65535)
+    assert rgb[0, 0, 0] != rgb[0, 0, 1]
+
+
+def test_8_bit_and_gray_images(tmp_path):
+    cv2.imwrite(str(tmp_path / "g.png"), np.full((3, 4), 51, np.uint8))
+    np.testing.assert_allclose(read_image(tmp_path / "g.png"), 0.2)
+
+
+def test_missing_and_corrupt_images_are_named(tmp_path):
+    with pytest.raises(InputError, match="nope.png: image file not found"):
+        read_image(tmp_path / "nope.png")
+    (tmp_path / "bad.png").write_bytes(b"not a png")
+    with pytest.raises(InputError, match="bad.png: not an image OpenCV can read"):
+        read_image(tmp_path / "bad.png")
+
+
+def test_mask_of_the_wrong_size(tmp_path):
+    cv2.imwrite(str(tmp_path / "mask.png"), np.full((3, 4), 255, np.uint8))
+    with pytest.raises(InputError, match=r"mask.png: mask is 4×3 pixels, but the images are 5×3"):
+        read_mask(tmp_path / "mask.png", (3, 5))
+
+
+def test_srgb_to_linear_known_values():
+    np.testing.assert_allclose(srgb_to_linear(np.array([0.0, 0.04045, 0.5, 1.0])),
+                               [0, 0.04045 / 12.92, 0.21404, 1.0], rtol=1e-4)
+
+
+def test_atomic_path_keeps_the_old_file_when_writing_fails(tmp_path):
+    target = tmp_path / "metrics.json"
+    target.write_text("old")
+    with pytest.raises(RuntimeError):
+        with atomic_path(target) as tmp:
+            tmp.write_text("half")
+            raise RuntimeError("killed")
+    assert target.read_text() == "old"
+    assert list(tmp_path.iterdir()) == [target]
+
+
+# DiLiGenT layout --------------------------------------------------------------------------
+
+def on_grid(sphere):
+    """The sphere subject with observed images quantised to 16 bits, as a real capture is."""
+    q = np.round(np.clip(sphere.observed_images(), 0, 1) * 65535).astype(np.float32) / 65535
+    return sphere.replace(images=q / sphere.light_intensities[:, None, None, :])
+
+
+def test_write_then_read_is_exact_for_16_bit_data(tmp_path, sphere):
+    original = on_grid(sphere)
+    write_diligent(original, tmp_path / "obj")
+    back = read_diligent(tmp_path / "obj")
+    np.testing.assert_array_equal(back.images, original.images)
+    np.testing.assert_array_equal(back.light_directions, original.light_directions)
+    np.testing.assert_array_equal(back.light_intensities, original.light_intensities)
+    np.testing.assert_array_equal(back.normals, original.normals)
+    np.testing.assert_array_equal(back.mask, original.mask)
+    np.testing.assert_array_equal(back.depth, original.depth)
+    assert back.name == original.name and back.frame == original.frame
+    # and once more: reading what was read gives the same bits
+    write_diligent(back, tmp_path / "again")
+    np.testing.assert_array_equal(read_diligent(tmp_path / "again").images, back.images)
+
+
+def test_bright_images_are_rescaled_not_clipped(tmp_path, sphere):
+    bright = sphere.replace(images=sphere.images * 7)
+    write_diligent(bright, tmp_path / "obj")
+    meta = json.loads((tmp_path / "obj" / "unps_subject.json").read_text())
+    assert meta["image_scale"] > 1
+    back = read_diligent(tmp_path / "obj")
+    peak = bright.observed_images().max()
+    np.testing.assert_allclose(back.observed_images() * meta["image_scale"],
+                               bright.observed_images(), atol=peak / 65535)
+
+
+def test_tiff_is_lossless_to_float32_rounding(tmp_path, sphere):
+    noisy = sphere.replace(images=sphere.images + np.float32(0.3) * np.random.default_rng(0)
+                           .standard_normal(sphere.images.shape).astype(np.float32))
+    write_diligent(noisy, tmp_path / "obj", image_format="tiff32")
+    np.testing.assert_allclose(read_diligent(tmp_path / "obj").images, noisy.images, rtol=1e-6, atol=1e-7)
+
+
+def test_writer_refuses_to_overwrite_and_leaves_nothing_half_written(tmp_path, sphere, monkeypatch):
+    write_diligent(sphere, tmp_path / "obj")
+    with pytest.raises(FileExistsError):
+        write_diligent(sphere, tmp_path / "obj")
+
+    import unps.data.diligent as diligent
+    def failing(path, rgb):
+        raise OSError("disk full")
+    monkeypatch.setattr(diligent, "write_png16", failing)
+    with pytest.raises(OSError, match="disk full"):
+        write_diligent(sphere, tmp_path / "new")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["obj"]
+
+
+@pytest.fixture
+def layout(tmp_path, sphere):
+    return write_diligent(on_grid(sphere), tmp_path / "objPNG")
+
+
+def test_name_defaults_to_the_folder_and_options_apply(layout):
+    (layout / "unps_subject.json").unlink()
+    full = read_diligent(layout)
+    s = read_diligent(layout, drop=["0-1"], crop_margin=1, downsample=2)
+    assert s.name == "obj" and s.n_images == 10 and s.frame.step == 2
+    assert s.frame.top == np.nonzero(full.mask)[0].min() - 1
+    assert s.filenames == full.filenames[2:]
+
+
+@pytest.mark.parametrize("damage, message", [
+    (lambda d: (d / "005.png").unlink(), "005.png: listed image is missing"),
+    (lambda d: (d / "filenames.txt").unlink(), "filenames.txt: missing"),
+    (lambda d: (d / "005.png").write_bytes(b"garbage"), "005.png: not an image OpenCV can read"),
+    (lambda d: cv2.imwrite(str(d / "005.png"), np.zeros((8, 8, 3), np.uint16)),
+     "005.png: image is 8×8, but 001.png is 32×32"),
+    (lambda d: np.savetxt(d / "light_directions.txt", np.ones((11, 3))),
+     "light_directions.txt: expected 12 light directions"),
+    (lambda d: np.savetxt(d / "light_directions.txt", np.r_[np.ones((11, 3)), [[np.nan, 0, 1]]]),
+     "light_directions.txt: light direction 11 is not finite"),
+    (lambda d: np.savetxt(d / "light_directions.txt", np.r_[[[0, 0, 0]], np.ones((11, 3))]),
+     "light_directions.txt: light direction 0 has zero length"),
+    (lambda d: (d / "light_directions.txt").write_text("1 2 x\n"), "light_directions.txt: cannot parse"),
+    (lambda d: np.savetxt(d / "light_intensities.txt", np.r_[np.ones((11, 3)), [[1, -1, 1]]]),
+     "light_intensities.txt: light intensities must be finite and > 0; row 11"),
+    (lambda d: (d / "light_intensities.txt").unlink(), "light_intensities.txt: missing"),
+    (lambda d: cv2.imwrite(str(d / "mask.png"), np.zeros((32, 32), np.uint8)), "mask.png: mask is empty"),
+    (lambda d: cv2.imwrite(str(d / "mask.png"), np.full((16, 32), 255, np.uint8)),
+     "mask.png: mask is 32×16 pixels, but the images are 32×32"),
+    (lambda d: scipy.io.savemat(d / "Normal_gt.mat", {"Normal_gt": np.zeros((32, 31, 3))}),
+     "Normal_gt.mat: Normal_gt has shape (32, 31, 3), expected (32, 32, 3)"),
+    (lambda d: scipy.io.savemat(d / "Normal_gt.mat", {"N": np.zeros((32, 32, 3))}),
+     "Normal_gt.mat: has no variable 'Normal_gt'"),
+])
+def test_bad_layout_is_refused_naming_the_file(layout, damage, message):
+    damage(layout)
+    with pytest.raises(InputError) as info:
+        read_diligent(layout)
+    assert message in str(info.value)
+
+
+def test_non_unit_directions_in_a_file_are_normalised_with_a_warning(layout, caplog):
+    d = np.loadtxt(layout / "light_directions.txt")
+    np.savetxt(layout / "light_directions.txt", 3 * d)
+    with caplog.at_level(logging.WARNING):
+        s = read_diligent(layout)
+    assert "light_directions.txt: 12 light directions are not unit length" in caplog.text
+    np.testing.assert_allclose(s.light_directions, d, atol=1e-6)
+
+
+def test_not_a_folder(tmp_path):
+    with pytest.raises(InputError, match="not a folder"):
+        read_diligent(tmp_path / "missing")
+
+
+# plain folder -----------------------------------------------------------------------------
+
+def test_folder_without_lights_is_uncalibrated(tmp_path, caplog):
+    for i in (10, 2, 1):                        # natural order: 1, 2, 10
+        cv2.imwrite(str(tmp_path / f"img{i}.png"), np.full((4, 5, 3), 10 * i, np.uint8))
+    with caplog.at_level(logging.WARNING):
+        s = read_folder(tmp_path)
+    assert not s.calibrated and s.light_intensities is None
+    assert s.filenames == ("img1.png", "img2.png", "img10.png")
+    assert s.mask.all() and "no mask file" in caplog.text
+    np.testing.assert_allclose(s.images[:, 0, 0, 0], [10 / 255, 20 / 255, 100 / 255])
+
+
+def test_folder_jpegs_are_linearised_and_lights_used_when_present(tmp_path):
+    for i in range(3):
+        cv2.imwrite(str(tmp_path / f"{i}.jpg"), np.full((8, 8, 3), 128, np.uint8))
+    cv2.imwrite(str(tmp_path / "mask.png"), np.full((8, 8), 255, np.uint8))
+    np.savetxt(tmp_path / "light_directions.txt", [[0, 0, 1], [0, 1, 1], [1, 0, 1]])
+    s = read_folder(tmp_path)
+    assert s.calibrated and s.n_images == 3
+    np.testing.assert_allclose(s.images[0, 4, 4], srgb_to_linear(np.full(3, 128 / 255)), atol=2e-3)
+    assert read_folder(tmp_path, encoding="linear").images[0, 4, 4, 0] == pytest.approx(128 / 255, abs=2e-3)
+
+
+def test_empty_folder_and_bad_encoding(tmp_path):
+    with pytest.raises(InputError, match="no image files"):
+        read_folder(tmp_path)
+    with pytest.raises(InputError, match="encoding must be auto, linear or srgb"):
+        read_folder(tmp_path, encoding="gamma")
