@@ -1,6 +1,7 @@
 """``python -m unps.fit``: normals, depth and albedo of one subject.
 
-    python -m unps.fit                                  # embedded analytic subject
+    python -m unps.fit                                  # Face, rendered on first use
+    python -m unps.fit subject=Vase noise=0.1 method=woodham
     python -m unps.fit subject=diligent subject.root=…/pmsData/ballPNG method=woodham
     python -m unps.fit subject=folder subject.root=~/captures/mug
     python -m unps.fit -m method=woodham,rpca subject=diligent subject.root=…
@@ -22,6 +23,7 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import MissingMandatoryValue
 
+from unps.data.subject import add_noise
 from unps.errors import InputError
 from unps.geometry import integrate_normals
 from unps.metrics import angular_error, normal_metrics
@@ -56,6 +58,7 @@ def fit(cfg: DictConfig) -> dict:
     out = Path(cfg.paths.output_dir)
     start = time.perf_counter()
     subject = instantiate(cfg.subject, _partial_=True)()   # called here so errors reach the user
+    subject, noise_reference = add_noise(subject, cfg.noise, seed=cfg.seed)
     light_name, light_source = build(cfg.light)
     lights = light_source(subject)
     method_name, method = build(cfg.method)
@@ -70,6 +73,7 @@ def fit(cfg: DictConfig) -> dict:
     runtime = time.perf_counter() - start
 
     metrics = {"subject": subject.name, "method": method_name, "light": light_name,
+               "noise": cfg.noise, "noise_reference": noise_reference,
                "runtime_s": runtime, "n_images": subject.n_images, "resolution": [h, w]}
     error = None
     if subject.normals is not None:

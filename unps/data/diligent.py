@@ -9,6 +9,7 @@ A folder holds ``filenames.txt`` (one image file per line), the images,
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import os
@@ -102,7 +103,7 @@ def read_folder(root: str | os.PathLike, mask: str = MASK, encoding: str = "auto
 
 
 def write_diligent(subject: Subject, root: str | os.PathLike, image_format: str = "png16",
-                   overwrite: bool = False) -> Path:
+                   overwrite: bool = False, metadata: dict | None = None) -> Path:
     """Write a subject in the DiLiGenT layout, atomically (the folder appears complete or not at all).
 
     ``png16`` stores the observed images (images × intensities) as 16-bit PNGs. If they
@@ -111,6 +112,9 @@ def write_diligent(subject: Subject, root: str | os.PathLike, image_format: str 
     ``unps_subject.json``. Values are rounded to the nearest of 65536 levels, so a subject
     read from 16-bit PNGs round-trips bit for bit. ``tiff32`` stores float32 TIFFs of any
     range (to float32 rounding of the intensity product).
+
+    ``unps_subject.json`` also lists every file's SHA-256 (see :func:`verify_files`) and any
+    ``metadata`` given.
 
     Returns:
         The folder written.
@@ -151,11 +155,39 @@ def write_diligent(subject: Subject, root: str | os.PathLike, image_format: str 
                        np.round((subject.normals + 1) * 127.5 * subject.mask[..., None]))
         if subject.depth is not None:
             scipy.io.savemat(tmp / DEPTH, {"Depth_gt": subject.depth})
-        meta = {"name": subject.name, "frame": subject.frame.to_dict(),
+        meta = {**(metadata or {}), "name": subject.name, "frame": subject.frame.to_dict(),
                 "image_format": image_format, "image_scale": scale,
-                "source_filenames": list(subject.filenames)}
+                "source_filenames": list(subject.filenames),
+                "files": {p.name: _sha256(p) for p in sorted(tmp.iterdir())}}
         (tmp / META).write_text(json.dumps(meta, indent=2) + "\n")
     return Path(root)
+
+
+def verify_files(root: str | os.PathLike) -> dict:
+    """Check a folder written by :func:`write_diligent` against its file list and checksums.
+
+    Returns:
+        Its ``unps_subject.json`` contents.
+
+    Raises:
+        InputError: the metadata is missing or unreadable, or a file is missing or altered.
+    """
+    root = Path(root)
+    try:
+        meta = json.loads((root / META).read_text())
+        files = meta["files"]
+    except (OSError, ValueError, KeyError) as e:
+        raise InputError(f"{root / META}: missing or unreadable ({e})") from None
+    for name, digest in files.items():
+        if not (root / name).is_file():
+            raise InputError(f"{root / name}: missing")
+        if _sha256(root / name) != digest:
+            raise InputError(f"{root / name}: contents differ from when it was written")
+    return meta
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def _check_root(root) -> Path:

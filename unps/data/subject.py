@@ -319,3 +319,27 @@ def prepare(subject: Subject, drop: Sequence[int | str] = (), crop_margin: int |
     if crop_margin is not None:
         subject = subject.crop_to_mask(int(crop_margin))
     return subject.downsample(downsample)
+
+
+def add_noise(subject: Subject, sigma: float, seed: int) -> tuple[Subject, float]:
+    """Add zero-mean Gaussian noise to the captured images (supplementary case study 2).
+
+    The standard deviation is σ times the reference level: the 99th percentile of the observed
+    (not intensity-normalised) pixel values on the object, so σ = 0.05 is 5 % of a bright
+    pixel whatever the exposure. Nothing is clipped: noisy values may be negative.
+
+    Returns:
+        The noisy subject (images divided by the intensities again) and the reference level.
+    """
+    if not np.isfinite(sigma) or sigma < 0:
+        raise InputError(f"noise must be a standard deviation >= 0, got {sigma}")
+    observed = subject.observed_images()
+    reference = float(np.percentile(observed[:, subject.mask], 99))
+    if sigma == 0:
+        return subject, reference
+    rng = np.random.default_rng(seed)
+    noisy = observed + np.float32(sigma * reference) * rng.standard_normal(observed.shape,
+                                                                          dtype=np.float32)
+    if subject.light_intensities is not None:
+        noisy /= subject.light_intensities[:, None, None, :]
+    return subject.replace(images=noisy), reference
