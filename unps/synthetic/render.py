@@ -157,12 +157,10 @@ def render_subject(name: str, mesh: Mesh, material: dict, texture: dict | None,
                          f"{resolution}, {spp}, {max_depth}")
     set_variant(variant)
     with tempfile.TemporaryDirectory() as tmp:
-        mesh_file = Path(tmp) / "mesh.ply"
-        write_ply(mesh_file, mesh.vertices, mesh.faces, mesh.vertex_normals(), mesh.planar_uv())
-        white = {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": 1.0}}
-        aov = _scene(mesh_file, white, {"type": "aov", "aovs": "cc:albedo,nn:sh_normal,pp:position"},
-                     resolution, AOV_SPP, "independent", light=False)
-        truth = np.array(mi.render(aov, seed=seed))
+        mesh_file = _write_mesh(mesh, Path(tmp))
+        normals, depth, mask = _ground_truth(mesh_file, resolution, seed)
+        if not mask.any():
+            raise InputError(f"{name}: the object covers no pixel fully at {resolution}×{resolution}")
         scene = _scene(mesh_file, mitsuba_bsdf(material, texture),
                        {"type": "path", "max_depth": max_depth}, resolution, spp, sampler)
         params = mi.traverse(scene)
@@ -176,15 +174,38 @@ def render_subject(name: str, mesh: Mesh, material: dict, texture: dict | None,
             params["light.irradiance.value"] = mi.ScalarColor3f(*(np.pi * intensities[i]))
             params.update()
             images[i] = np.array(mi.render(scene, seed=seed * 1_000_003 + i))[..., :3]
+    return Subject(name=name, images=images / intensities[:, None, None, :], mask=mask,
+                   light_directions=directions, light_intensities=intensities,
+                   normals=normals, depth=depth)
 
+
+def _write_mesh(mesh: Mesh, folder: Path) -> Path:
+    path = folder / "mesh.ply"
+    write_ply(path, mesh.vertices, mesh.faces, mesh.vertex_normals(), mesh.planar_uv())
+    return path
+
+
+def _ground_truth(mesh_file: Path, resolution: int, seed: int
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    import mitsuba as mi
+
+    white = {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": 1.0}}
+    aov = _scene(mesh_file, white, {"type": "aov", "aovs": "cc:albedo,nn:sh_normal,pp:position"},
+                 resolution, AOV_SPP, "independent", light=False)
+    truth = np.array(mi.render(aov, seed=seed))
     coverage, normals, position = truth[..., 0], truth[..., 3:6], truth[..., 6:9]
     mask = coverage > FULL_COVERAGE
-    if not mask.any():
-        raise InputError(f"{name}: the object covers no pixel fully at {resolution}×{resolution}")
     normals = normals / np.maximum(np.linalg.norm(normals, axis=-1), 1e-12)[..., None]
     normals *= np.where(normals[..., 2:] < 0, -1, 1)            # the side the camera sees
     normals[~mask] = 0
     depth = np.where(mask, position[..., 2] * resolution / 2, np.nan)   # pixel pitch 2/resolution
-    return Subject(name=name, images=images / intensities[:, None, None, :], mask=mask,
-                   light_directions=directions, light_intensities=intensities,
-                   normals=normals.astype(np.float32), depth=depth.astype(np.float32))
+    return normals.astype(np.float32), depth.astype(np.float32), mask
+
+
+def render_ground_truth(mesh: Mesh, resolution: int, variant: str = "scalar_rgb", seed: int = 0
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Normals (H, W, 3) facing the camera, depth (H, W) along +z in pixel units (NaN off the
+    object) and the mask of fully covered pixels, from Mitsuba's AOVs (no shading)."""
+    set_variant(variant)
+    with tempfile.TemporaryDirectory() as tmp:
+        return _ground_truth(_write_mesh(mesh, Path(tmp)), resolution, seed)

@@ -170,21 +170,25 @@ def tablet(resolution: int = 320, concavity: float = 0.2, wedges: int = 70,
     return height_field_mesh(z, sd < -0.004)
 
 
-def broken_pot(resolution: int = 320, radius: float = 0.95, pieces: int = 9, seed: int = 0) -> Mesh:
+def broken_pot(resolution: int = 320, radius: float = 0.9, pieces: int = 9,
+               reach: tuple[float, float] = (0.78, 0.93), rings: float = 0.002,
+               seed: int = 0) -> Mesh:
     """A fragment of a pot's shell seen from inside: a bowl concave toward the camera.
 
-    Its outline is a star polygon with straight break edges; throwing rings ripple the inside.
+    Its outline is a star polygon with straight break edges, its corners ``reach`` from the
+    axis (up the steep wall near ``radius``); throwing rings of amplitude ``rings`` ripple
+    the inside.
     """
     rng = np.random.default_rng(seed)
     x, y = _grid(resolution)
     rho = np.hypot(x, y)
-    z = radius - np.sqrt(np.maximum(radius ** 2 - rho ** 2, 0)) + 0.006 * np.sin(2 * np.pi * rho / 0.08)
+    z = radius - np.sqrt(np.maximum(radius ** 2 - rho ** 2, 0)) + rings * np.sin(2 * np.pi * rho / 0.08)
     corners = np.sort(rng.uniform(0, 2 * np.pi, pieces))
-    reach = rng.uniform(0.72, 0.92, pieces)
-    px, py = reach * np.cos(corners), reach * np.sin(corners)
+    distance = rng.uniform(*reach, pieces)
+    px, py = distance * np.cos(corners), distance * np.sin(corners)
     inside = PolygonPath(np.stack([px, py], 1)).contains_points(
         np.stack([x.ravel(), y.ravel()], 1)).reshape(x.shape)
-    return height_field_mesh(z, inside & (rho < 0.93))
+    return height_field_mesh(z, inside & (rho < 0.985 * radius))
 
 
 def vase(tilt_deg: float = 50.0, height: float = 1.5, segments: int = 160, rings: int = 120,

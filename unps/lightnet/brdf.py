@@ -1,0 +1,161 @@
+"""Isotropic BRDFs for training data: analytic lobes, the MERL tables, and their neural fits.
+
+Every BRDF is called with local directions (normal = +z) ``wi`` (to the light) and ``wo``
+(to the camera), (..., 3) unit tensors, and returns (..., 3) RGB values f(wi, wo) in the
+MERL database's units; the rendered radiance is e · f · cos θᵢ.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from unps.errors import InputError
+
+MERL_SHAPE = (90, 90, 180)                          # θ_h, θ_d, φ_d
+MERL_SCALE = (1.0 / 1500, 1.15 / 1500, 1.66 / 1500)
+
+
+def half_diff_angles(wi: torch.Tensor, wo: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Rusinkiewicz coordinates θ_h, θ_d, φ_d of local direction pairs (normal = +z).
+
+    The half vector h = (wi + wo)/|·| has polar angle θ_h; d is wi seen from h: wi rotated by
+    −φ_h about z and then by −θ_h about y, with polar angle θ_d and azimuth φ_d.
+    """
+    h = torch.nn.functional.normalize(wi + wo, dim=-1)
+    theta_h = torch.acos(h[..., 2].clamp(-1, 1))
+    phi_h = torch.atan2(h[..., 1], h[..., 0])
+    c, s = torch.cos(phi_h), torch.sin(phi_h)
+    x = c * wi[..., 0] + s * wi[..., 1]
+    y = -s * wi[..., 0] + c * wi[..., 1]
+    ct, st = torch.cos(theta_h), torch.sin(theta_h)
+    dx, dz = ct * x - st * wi[..., 2], st * x + ct * wi[..., 2]
+    return theta_h, torch.acos(dz.clamp(-1, 1)), torch.atan2(y, dx)
+
+
+class AnalyticBRDF(nn.Module):
+    """Lambertian diffuse plus a GGX / Cook–Torrance specular lobe.
+
+    f = ρ_d/π + ρ_s · D(θ_h; α) · G · F(θ_d) / (4 cos θᵢ cos θₒ), Smith–GGX masking, Schlick
+    Fresnel with F₀ = 0.04 (a dielectric coat).
+
+    Args:
+        diffuse, specular: (3,) RGB albedos.
+        roughness: GGX α.
+    """
+
+    def __init__(self, diffuse, specular, roughness: float):
+        super().__init__()
+        self.register_buffer("diffuse", torch.as_tensor(diffuse, dtype=torch.float32))
+        self.register_buffer("specular", torch.as_tensor(specular, dtype=torch.float32))
+        self.roughness = float(roughness)
+
+    def forward(self, wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
+        a2 = self.roughness ** 2
+        h = torch.nn.functional.normalize(wi + wo, dim=-1)
+        cos_h, cos_i, cos_o = h[..., 2], wi[..., 2].clamp_min(1e-4), wo[..., 2].clamp_min(1e-4)
+        d = a2 / (math.pi * (cos_h ** 2 * (a2 - 1) + 1) ** 2)
+        g1 = lambda c: 2 * c / (c + torch.sqrt(a2 + (1 - a2) * c ** 2))   # noqa: E731
+        fresnel = 0.04 + 0.96 * (1 - (wi * h).sum(-1).clamp(0, 1)) ** 5
+        lobe = (d * g1(cos_i) * g1(cos_o) * fresnel / (4 * cos_i * cos_o))[..., None]
+        return self.diffuse / math.pi + self.specular * lobe
+
+
+def random_analytic(generator: torch.Generator) -> AnalyticBRDF:
+    """A random analytic material: coloured diffuse, grey-to-tinted specular, α in [0.05, 0.6]."""
+    u = torch.rand(8, generator=generator)
+    diffuse = 0.1 + 0.8 * u[:3]
+    specular = (0.0 + 1.5 * u[3]) * (0.7 + 0.3 * u[4:7])
+    roughness = 0.05 + 0.55 * float(u[7]) ** 1.5
+    return AnalyticBRDF(diffuse, specular, roughness)
+
+
+class TabulatedBRDF(nn.Module):
+    """A MERL measured BRDF: a 90×90×180 table per colour over (θ_h, θ_d, φ_d).
+
+    Indexing follows MERL's reference reader: θ_h non-linearly (√(θ_h / 90°) · 90), θ_d
+    linearly, φ_d over [0°, 180°) using reciprocity; the colour scales 1/1500, 1.15/1500,
+    1.66/1500 are applied, negative (unmeasured) entries read as 0.
+    """
+
+    def __init__(self, table: np.ndarray):
+        super().__init__()
+        if table.shape != (3,) + MERL_SHAPE:
+            raise ValueError(f"expected a (3, 90, 90, 180) table, got {table.shape}")
+        scaled = np.maximum(table, 0) * np.asarray(MERL_SCALE)[:, None, None, None]
+        self.register_buffer("table", torch.as_tensor(scaled, dtype=torch.float32).flatten(1))
+
+    def forward(self, wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
+        theta_h, theta_d, phi_d = half_diff_angles(wi, wo)
+        th = (torch.sqrt(theta_h.clamp_min(0) / (math.pi / 2)) * 90).long().clamp(0, 89)
+        td = (theta_d / (math.pi / 2) * 90).long().clamp(0, 89)
+        phi = torch.where(phi_d < 0, phi_d + math.pi, phi_d)
+        pd = (phi / math.pi * 180).long().clamp(0, 179)
+        index = (th * 90 + td) * 180 + pd
+        return self.table[:, index].movedim(0, -1)
+
+
+def read_merl_binary(path: str | os.PathLike) -> TabulatedBRDF:
+    """Read a MERL ``.binary`` file: three int32 dimensions (90, 90, 180), then 3×90×90×180
+    float64 values in R, G, B blocks."""
+    path = Path(path)
+    data = path.read_bytes() if path.is_file() else None
+    if data is None:
+        raise InputError(f"{path}: MERL BRDF file not found")
+    dims = np.frombuffer(data[:12], dtype="<i4") if len(data) >= 12 else np.zeros(3)
+    expected = 12 + 8 * 3 * int(np.prod(MERL_SHAPE))
+    if tuple(dims) != MERL_SHAPE or len(data) != expected:
+        raise InputError(f"{path}: not a MERL BRDF (expected dimensions 90 90 180 and {expected} "
+                         f"bytes, found {tuple(int(d) for d in dims)} and {len(data)} bytes)")
+    table = np.frombuffer(data[12:], dtype="<f8").reshape((3,) + MERL_SHAPE)
+    return TabulatedBRDF(table)
+
+
+class NeuralBRDF(nn.Module):
+    """A neural fit of a MERL material (Sztrajman et al. 2021): Dense 6→21→21→3, exp(x) − 1.
+
+    Input: the half vector with φ_h = 0, h = (sin θ_h, 0, cos θ_h), and the difference vector
+    d = (sin θ_d cos φ_d, sin θ_d sin φ_d, cos θ_d). Output: RGB in MERL's units.
+    """
+
+    def __init__(self, layers: list[tuple[np.ndarray, np.ndarray]]):
+        super().__init__()
+        self.layers = nn.ModuleList()
+        for kernel, bias in layers:
+            linear = nn.Linear(*kernel.shape)
+            with torch.no_grad():
+                linear.weight.copy_(torch.as_tensor(kernel.T))
+                linear.bias.copy_(torch.as_tensor(bias))
+            self.layers.append(linear)
+
+    def forward(self, wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
+        theta_h, theta_d, phi_d = half_diff_angles(wi, wo)
+        st = torch.sin(theta_d)
+        x = torch.stack([torch.sin(theta_h), torch.zeros_like(theta_h), torch.cos(theta_h),
+                         st * torch.cos(phi_d), st * torch.sin(phi_d), torch.cos(theta_d)], -1)
+        for i, layer in enumerate(self.layers):
+            x = layer(x)
+            if i < len(self.layers) - 1:
+                x = torch.relu(x)
+        return torch.expm1(x).clamp_min(0)
+
+
+def read_neural_brdf(path: str | os.PathLike) -> NeuralBRDF:
+    """Read a neural BRDF fit (``<material>.h5``, Keras weights ``dense_k/dense_k/kernel:0``)."""
+    import h5py
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: neural BRDF file not found")
+    try:
+        with h5py.File(path, "r") as f:
+            layers = [(np.asarray(f[f"dense_{k}/dense_{k}/kernel:0"], np.float32),
+                       np.asarray(f[f"dense_{k}/dense_{k}/bias:0"], np.float32)) for k in (1, 2, 3)]
+    except (OSError, KeyError) as e:
+        raise InputError(f"{path}: not a neural BRDF fit with layers dense_1…dense_3 ({e})") from None
+    return NeuralBRDF(layers)

@@ -1,0 +1,105 @@
+"""``python -m unps.train light=mimo``: train the light estimation network.
+
+    python -m unps.train                           # the 2-core CPU recipe (recipe=cpu)
+    python -m unps.train recipe=paper              # the paper's sizes (a GPU)
+    python -m unps.train ckpt_path=<run>/checkpoints/last.ckpt   # resume, with that run's config
+
+Data are rendered on the fly (``unps.lightnet.synthesis``); checkpoints, TensorBoard logs
+and ``metrics.json`` land in the run folder.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+import time
+from pathlib import Path
+
+import hydra
+import torch
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import MissingMandatoryValue
+
+from unps.errors import InputError
+
+log = logging.getLogger("unps.train")
+
+
+def datasets(cfg: DictConfig):
+    """Training and held-out validation sets of one run config."""
+    from unps.lightnet.synthesis import LightDataset, MaterialBank, mesh_views
+
+    recipe, data = cfg.recipe, cfg.data
+    meshes = (mesh_views(data.meshes_dir, recipe.resolution, data.views_per_mesh, cfg.seed)
+              if data.meshes_dir else None)
+    common = dict(resolution=recipe.resolution, images=recipe.images,
+                  lights_per_shape=data.lights_per_shape, max_zenith_deg=data.max_zenith_deg,
+                  materials=MaterialBank(**data.materials), meshes=meshes,
+                  mesh_fraction=data.mesh_fraction, texture=data.texture,
+                  perturbation=data.perturbation)
+    train = LightDataset(length=recipe.max_steps * recipe.batch_size, seed=cfg.seed, **common)
+    val = LightDataset(length=recipe.val_samples, seed=cfg.seed + 1_000_003, **common)
+    return train, val
+
+
+def train(cfg: DictConfig) -> dict:
+    """Train (or resume) and return the final validation metrics."""
+    import lightning as L
+    from lightning.pytorch.callbacks import LearningRateMonitor, ModelCheckpoint
+    from lightning.pytorch.loggers import TensorBoardLogger
+    from torch.utils.data import DataLoader
+
+    from unps.io.files import write_json
+    from unps.lightnet.callbacks import LightSamples
+    from unps.lightnet.system import LightEstimation
+
+    out = Path(cfg.paths.output_dir)
+    if cfg.ckpt_path:
+        ckpt = Path(cfg.ckpt_path).expanduser()
+        if not ckpt.is_file():
+            raise InputError(f"{ckpt}: checkpoint to resume from not found")
+        saved = torch.load(ckpt, map_location="cpu", weights_only=False).get("unps_config")
+        if saved is None:
+            raise InputError(f"{ckpt}: not a unps.train checkpoint (no unps_config inside)")
+        log.info("resuming from %s with the config saved in it", ckpt)
+        cfg = OmegaConf.merge(OmegaConf.create(saved),
+                              {"paths": {"output_dir": str(out)}, "ckpt_path": str(ckpt)})
+    L.seed_everything(cfg.seed, workers=True, verbose=False)
+    torch.set_num_threads(cfg.recipe.threads or torch.get_num_threads())
+    train_set, val_set = datasets(cfg)
+    loader = dict(batch_size=cfg.recipe.batch_size, num_workers=cfg.recipe.workers,
+                  persistent_workers=cfg.recipe.workers > 0)
+    system = LightEstimation(instantiate(cfg.light), lr=cfg.recipe.lr,
+                             soft_decode=cfg.soft_decode,
+                             config=OmegaConf.to_container(cfg, resolve=True))
+    trainer = L.Trainer(
+        max_steps=cfg.recipe.max_steps, max_time=cfg.recipe.max_time,
+        val_check_interval=cfg.recipe.val_every, check_val_every_n_epoch=None,
+        default_root_dir=out, logger=TensorBoardLogger(str(out), name="tensorboard", version=""),
+        callbacks=[ModelCheckpoint(dirpath=out / "checkpoints", save_last=True,
+                                   monitor="val/direction_mae", mode="min", save_top_k=1,
+                                   filename="best"),
+                   LightSamples(), LearningRateMonitor()],
+        accelerator="auto", devices=1, log_every_n_steps=cfg.recipe.log_every,
+        enable_progress_bar=True, deterministic=False)
+    start = time.perf_counter()
+    trainer.fit(system, DataLoader(train_set, **loader), DataLoader(val_set, **loader),
+                ckpt_path=cfg.ckpt_path or None)
+    metrics = {k: float(v) for k, v in trainer.callback_metrics.items()}
+    metrics.update(train_seconds=time.perf_counter() - start, steps=trainer.global_step)
+    write_json(out / "metrics.json", metrics)
+    return metrics
+
+
+@hydra.main(version_base="1.3", config_path="pkg://unps.conf", config_name="train")
+def main(cfg: DictConfig) -> None:
+    try:
+        train(cfg)
+    except (InputError, MissingMandatoryValue) as e:
+        log.error("%s", e)
+        sys.exit(2)
+
+
+if __name__ == "__main__":
+    main()
