@@ -71,7 +71,8 @@ def train(cfg: DictConfig) -> dict:
     loader = dict(batch_size=cfg.recipe.batch_size, num_workers=cfg.recipe.workers,
                   persistent_workers=cfg.recipe.workers > 0)
     system = LightEstimation(instantiate(cfg.light), lr=cfg.recipe.lr,
-                             soft_decode=cfg.soft_decode,
+                             lr_milestones=tuple(cfg.recipe.lr_milestones),
+                             lr_gamma=cfg.recipe.lr_gamma, soft_decode=cfg.soft_decode,
                              config=OmegaConf.to_container(cfg, resolve=True))
     trainer = L.Trainer(
         max_steps=cfg.recipe.max_steps, max_time=cfg.recipe.max_time,

@@ -43,14 +43,16 @@ class LightEstimation(L.LightningModule):
     Args:
         net: the :class:`LightNet`.
         lr: Adam's learning rate.
+        lr_milestones: steps after which the learning rate is multiplied by ``lr_gamma``.
         soft_decode: decode predictions by soft-arg-max (else arg-max) for the metrics.
         config: the resolved run config, stored in every checkpoint.
     """
 
-    def __init__(self, net: LightNet, lr: float = 5e-4, soft_decode: bool = True,
-                 config: dict | None = None):
+    def __init__(self, net: LightNet, lr: float = 5e-4, lr_milestones: tuple[int, ...] = (),
+                 lr_gamma: float = 0.3, soft_decode: bool = True, config: dict | None = None):
         super().__init__()
         self.net, self.lr, self.soft_decode = net, lr, soft_decode
+        self.lr_milestones, self.lr_gamma = list(lr_milestones), lr_gamma
         self.config = config or {}
 
     def forward(self, images, mask):
@@ -90,7 +92,9 @@ class LightEstimation(L.LightningModule):
         return self._step(batch, "val")
 
     def configure_optimizers(self):
-        return torch.optim.Adam(self.net.parameters(), lr=self.lr)
+        optimizer = torch.optim.Adam(self.net.parameters(), lr=self.lr)
+        schedule = torch.optim.lr_scheduler.MultiStepLR(optimizer, self.lr_milestones, self.lr_gamma)
+        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": schedule, "interval": "step"}}
 
     def on_save_checkpoint(self, checkpoint: dict) -> None:
         checkpoint["unps_config"] = self.config
