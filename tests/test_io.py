@@ -1,6 +1,5 @@
 import json
 import logging
-import shutil
 
 import cv2
 import numpy as np
@@ -8,7 +7,6 @@ import pytest
 import scipy.io
 
 from unps.data.diligent import read_diligent, read_folder, write_diligent
-from unps.data.subject import Subject
 from unps.errors import InputError
 from unps.io.files import atomic_path
 from unps.io.images import read_image, read_mask, srgb_to_linear

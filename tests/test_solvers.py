@@ -1,5 +1,4 @@
 import numpy as np
-import pytest
 import torch
 
 from unps.data.analytic import render_lambertian

@@ -1,4 +1,8 @@
-"""The one exception users see for bad input."""
+"""The one exception users see for bad input, and how the command-line entry points report it."""
+
+import functools
+import logging
+import sys
 
 
 class InputError(ValueError):
@@ -7,3 +11,18 @@ class InputError(ValueError):
     Raised before any work starts, so nothing is left half-written. The command-line
     entry points print the message without a traceback and exit with status 2.
     """
+
+
+def exit_on_bad_input(task):
+    """Wrap a ``task(cfg)`` entry point: bad input is logged in one line and exits with status 2."""
+    from omegaconf.errors import MissingMandatoryValue
+
+    @functools.wraps(task)
+    def run(cfg):
+        try:
+            return task(cfg)
+        except (InputError, MissingMandatoryValue) as e:
+            logging.getLogger(task.__module__).error("%s", e)
+            sys.exit(2)
+
+    return run

@@ -13,7 +13,6 @@ Outputs land in Hydra's run folder (``hydra.run.dir=…`` moves it); see
 from __future__ import annotations
 
 import logging
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -21,12 +20,12 @@ from typing import Any
 import hydra
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
-from omegaconf.errors import MissingMandatoryValue
 
-from unps.data.subject import add_noise
-from unps.errors import InputError
+from unps.data.subject import Subject, add_noise
+from unps.errors import exit_on_bad_input
 from unps.geometry import integrate_normals
-from unps.metrics import angular_error, normal_metrics
+from unps.lights import Lights
+from unps.metrics import angular_error, light_direction_mae, light_intensity_error, normal_metrics
 
 log = logging.getLogger("unps.fit")
 
@@ -61,6 +60,10 @@ def fit(cfg: DictConfig) -> dict:
     subject, noise_reference = add_noise(subject, cfg.noise, seed=cfg.seed)
     light_name, light_source = build(cfg.light)
     lights = light_source(subject)
+    light_metrics = {}
+    if lights.source != "gt":
+        light_metrics = light_errors(lights, subject)
+        subject = with_lights(subject, lights)
     method_name, method = build(cfg.method)
     h, w = subject.resolution
     log.info("%s: %d images, %d×%d pixels (%d on the object), read in %.1f s; lights: %s; "
@@ -74,7 +77,8 @@ def fit(cfg: DictConfig) -> dict:
 
     metrics = {"subject": subject.name, "method": method_name, "light": light_name,
                "noise": cfg.noise, "noise_reference": noise_reference,
-               "runtime_s": runtime, "n_images": subject.n_images, "resolution": [h, w]}
+               "runtime_s": runtime, "n_images": subject.n_images, "resolution": [h, w],
+               **light_metrics}
     error = None
     if subject.normals is not None:
         error = angular_error(estimate.normals, subject.normals)
@@ -86,13 +90,35 @@ def fit(cfg: DictConfig) -> dict:
     return metrics
 
 
+def light_errors(lights: Lights, subject: Subject) -> dict[str, float]:
+    """``light_dir_mae`` (degrees) and ``light_int_err`` (scale-invariant, on the mean of RGB)
+    of estimated lights against the subject's own, where it has them."""
+    out = {}
+    if subject.light_directions is not None:
+        out["light_dir_mae"] = light_direction_mae(lights.directions, subject.light_directions)
+    if subject.light_intensities is not None and lights.intensities is not None:
+        out["light_int_err"] = light_intensity_error(lights.intensities.mean(1),
+                                                     subject.light_intensities.mean(1))
+    if out:
+        log.info("estimated lights: direction error %.2f°, intensity error %.3f",
+                 out.get("light_dir_mae", float("nan")), out.get("light_int_err", float("nan")))
+    return out
+
+
+def with_lights(subject: Subject, lights: Lights) -> Subject:
+    """The subject as the method must see it with these lights: captured images divided by
+    their intensities, and the lights in place of any known ones."""
+    observed = subject.observed_images()
+    intensities = lights.intensities
+    images = observed / intensities[:, None, None, :] if intensities is not None else observed
+    return subject.replace(images=images, light_directions=lights.directions,
+                           light_intensities=intensities)
+
+
 @hydra.main(version_base="1.3", config_path="pkg://unps.conf", config_name="fit")
+@exit_on_bad_input
 def main(cfg: DictConfig) -> None:
-    try:
-        fit(cfg)
-    except (InputError, MissingMandatoryValue) as e:
-        log.error("%s", e)
-        sys.exit(2)
+    fit(cfg)
 
 
 if __name__ == "__main__":

@@ -11,17 +11,15 @@ The subject is stored in the DiLiGenT layout (16-bit PNGs, GT lights, normals, d
 from __future__ import annotations
 
 import logging
-import sys
 from pathlib import Path
 
 import hydra
 import numpy as np
 from hydra.utils import instantiate
 from omegaconf import DictConfig
-from omegaconf.errors import MissingMandatoryValue
 
 from unps.data.subject import Subject
-from unps.errors import InputError
+from unps.errors import InputError, exit_on_bad_input
 from unps.io.images import write_png8
 from unps.io.pictures import normal_rgb
 
@@ -54,12 +52,9 @@ def render(cfg: DictConfig) -> Subject:
 
 
 @hydra.main(version_base="1.3", config_path="pkg://unps.conf", config_name="render")
+@exit_on_bad_input
 def main(cfg: DictConfig) -> None:
-    try:
-        render(cfg)
-    except (InputError, MissingMandatoryValue) as e:
-        log.error("%s", e)
-        sys.exit(2)
+    render(cfg)
 
 
 if __name__ == "__main__":

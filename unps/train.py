@@ -11,7 +11,6 @@ and ``metrics.json`` land in the run folder.
 from __future__ import annotations
 
 import logging
-import sys
 import time
 from pathlib import Path
 
@@ -19,15 +18,14 @@ import hydra
 import torch
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
-from omegaconf.errors import MissingMandatoryValue
 
-from unps.errors import InputError
+from unps.errors import InputError, exit_on_bad_input
 
 log = logging.getLogger("unps.train")
 
 
-def datasets(cfg: DictConfig):
-    """Training and held-out validation sets of one run config."""
+def datasets(cfg: DictConfig, start_step: int = 0):
+    """Training and held-out validation sets of one run config; training starts at ``start_step``."""
     from unps.lightnet.synthesis import LightDataset, MaterialBank, mesh_views
 
     recipe, data = cfg.recipe, cfg.data
@@ -38,7 +36,9 @@ def datasets(cfg: DictConfig):
                   materials=MaterialBank(**data.materials), meshes=meshes,
                   mesh_fraction=data.mesh_fraction, texture=data.texture,
                   perturbation=data.perturbation)
-    train = LightDataset(length=recipe.max_steps * recipe.batch_size, seed=cfg.seed, **common)
+    done = start_step * recipe.batch_size
+    train = LightDataset(length=max(recipe.max_steps * recipe.batch_size - done, recipe.batch_size),
+                         seed=cfg.seed, offset=done, **common)
     val = LightDataset(length=recipe.val_samples, seed=cfg.seed + 1_000_003, **common)
     return train, val
 
@@ -55,11 +55,13 @@ def train(cfg: DictConfig) -> dict:
     from unps.lightnet.system import LightEstimation
 
     out = Path(cfg.paths.output_dir)
+    start_step = 0
     if cfg.ckpt_path:
         ckpt = Path(cfg.ckpt_path).expanduser()
         if not ckpt.is_file():
             raise InputError(f"{ckpt}: checkpoint to resume from not found")
-        saved = torch.load(ckpt, map_location="cpu", weights_only=False).get("unps_config")
+        checkpoint = torch.load(ckpt, map_location="cpu", weights_only=False)
+        saved, start_step = checkpoint.get("unps_config"), checkpoint.get("global_step", 0)
         if saved is None:
             raise InputError(f"{ckpt}: not a unps.train checkpoint (no unps_config inside)")
         log.info("resuming from %s with the config saved in it", ckpt)
@@ -67,7 +69,7 @@ def train(cfg: DictConfig) -> dict:
                               {"paths": {"output_dir": str(out)}, "ckpt_path": str(ckpt)})
     L.seed_everything(cfg.seed, workers=True, verbose=False)
     torch.set_num_threads(cfg.recipe.threads or torch.get_num_threads())
-    train_set, val_set = datasets(cfg)
+    train_set, val_set = datasets(cfg, start_step)
     loader = dict(batch_size=cfg.recipe.batch_size, num_workers=cfg.recipe.workers,
                   persistent_workers=cfg.recipe.workers > 0)
     system = LightEstimation(instantiate(cfg.light), lr=cfg.recipe.lr,
@@ -94,12 +96,9 @@ def train(cfg: DictConfig) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="pkg://unps.conf", config_name="train")
+@exit_on_bad_input
 def main(cfg: DictConfig) -> None:
-    try:
-        train(cfg)
-    except (InputError, MissingMandatoryValue) as e:
-        log.error("%s", e)
-        sys.exit(2)
+    train(cfg)
 
 
 if __name__ == "__main__":

@@ -208,9 +208,9 @@ class Subject:
     def select(self, indices: Sequence[int]) -> Subject:
         """Keep only the images at ``indices`` (0-based, in this order)."""
         idx = np.asarray(indices, dtype=int)
-        pick = (lambda a: None if a is None else a[idx])
-        return self.replace(images=self.images[idx], light_directions=pick(self.light_directions),
-                            light_intensities=pick(self.light_intensities),
+        return self.replace(images=self.images[idx],
+                            light_directions=_index(self.light_directions, idx),
+                            light_intensities=_index(self.light_intensities, idx),
                             filenames=tuple(self.filenames[i] for i in idx))
 
     def crop(self, top: int, left: int, height: int, width: int) -> Subject:
@@ -218,9 +218,9 @@ class Subject:
         rows, cols = slice(top, top + height), slice(left, left + width)
         frame = dataclasses.replace(self.frame, top=self.frame.top + top * self.frame.step,
                                     left=self.frame.left + left * self.frame.step)
-        win = (lambda a: None if a is None else a[rows, cols])
         return self.replace(images=self.images[:, rows, cols], mask=self.mask[rows, cols],
-                            normals=win(self.normals), depth=win(self.depth), frame=frame)
+                            normals=_index(self.normals, (rows, cols)),
+                            depth=_index(self.depth, (rows, cols)), frame=frame)
 
     def crop_to_mask(self, margin: int) -> Subject:
         """Crop to the mask's bounding box grown by ``margin`` pixels (kept inside the image)."""
@@ -266,6 +266,11 @@ class Subject:
         frame = dataclasses.replace(self.frame, step=self.frame.step * f)
         return self.replace(images=images, mask=coverage >= 0.5, normals=normals, depth=depth,
                             frame=frame)
+
+
+def _index(a: np.ndarray | None, index) -> np.ndarray | None:
+    """``a[index]``, or None for a missing (None) array."""
+    return None if a is None else a[index]
 
 
 def _blocks(a: np.ndarray, f: int) -> np.ndarray:

@@ -132,6 +132,7 @@ class NeuralBRDF(nn.Module):
                 linear.weight.copy_(torch.as_tensor(kernel.T))
                 linear.bias.copy_(torch.as_tensor(bias))
             self.layers.append(linear)
+        self.requires_grad_(False)                   # a fixed material, not a model to train
 
     def forward(self, wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
         theta_h, theta_d, phi_d = half_diff_angles(wi, wo)

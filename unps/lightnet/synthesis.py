@@ -225,6 +225,7 @@ class LightDataset(Dataset):
         perturbation: half-width of the uniform noise added to images scaled to a 99th
             percentile of 1.
         family: force one material family (for per-family validation).
+        offset: item i is sample ``offset + i`` (a resumed run continues where it stopped).
     """
 
     def __init__(self, length: int, resolution: int = 128, images: int = 32,
@@ -232,7 +233,7 @@ class LightDataset(Dataset):
                  materials: MaterialBank | None = None, meshes: list[ShapeMaps] | None = None,
                  mesh_fraction: float = 0.0, texture: float = 0.3, perturbation: float = 0.025,
                  intensity_range: tuple[float, float] = (0.2, 2.0), seed: int = 0,
-                 family: str | None = None):
+                 family: str | None = None, offset: int = 0):
         if resolution % 32 or resolution < 32:
             raise InputError(f"resolution must be a multiple of 32, got {resolution}")
         if not 1 <= images <= lights_per_shape:
@@ -243,12 +244,13 @@ class LightDataset(Dataset):
         self.meshes, self.mesh_fraction = meshes or [], mesh_fraction if meshes else 0.0
         self.texture, self.perturbation = texture, perturbation
         self.intensity_range, self.seed, self.family = intensity_range, seed, family
+        self.offset = offset
 
     def __len__(self) -> int:
         return self.length
 
     def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
-        g = sample_generator(self.seed, index)
+        g = sample_generator(self.seed, self.offset + index)
         u = lambda *shape: torch.rand(*shape, generator=g)           # noqa: E731
         if self.meshes and float(u(1)) < self.mesh_fraction:
             maps = self.meshes[int(torch.randint(len(self.meshes), (1,), generator=g))]

@@ -14,7 +14,6 @@ from omegaconf import OmegaConf
 from unps.errors import InputError
 from unps.lightnet.bins import decode_lights, encode_lights
 from unps.lightnet.network import LightNet
-from unps.metrics import angular_error
 
 FAMILIES = ("analytic", "merl", "neural")
 SHIPPED = Path(__file__).parent / "weights" / "lightnet.pt"

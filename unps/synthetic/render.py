@@ -167,10 +167,10 @@ def render_subject(name: str, mesh: Mesh, material: dict, texture: dict | None,
         images = np.empty((len(directions), resolution, resolution, 3), np.float32)
         for i in tqdm(range(len(directions)), desc=f"rendering {name}", unit="image",
                       disable=not progress, leave=False):
-            l = directions[i].astype(np.float64)
-            up = [0, 1, 0] if abs(l[1]) < 0.9 else [1, 0, 0]
+            light = directions[i].astype(np.float64)
+            up = [0, 1, 0] if abs(light[1]) < 0.9 else [1, 0, 0]
             params["light.to_world"] = mi.ScalarAffineTransform4f().look_at(
-                origin=[0, 0, 0], target=list(-l), up=up)
+                origin=[0, 0, 0], target=list(-light), up=up)
             params["light.irradiance.value"] = mi.ScalarColor3f(*(np.pi * intensities[i]))
             params.update()
             images[i] = np.array(mi.render(scene, seed=seed * 1_000_003 + i))[..., :3]

@@ -1,0 +1,124 @@
+"""The light network: real DiLiGenT, held-out synthetic renders per BRDF family, and speed.
+
+    python experiments/light_estimation/benchmark.py [--checkpoint PATH] [--data ../shared/data]
+
+1. DiLiGenT (ball 16-bit, cat and pot1 crops, all 96 images): direction MAE and scale-invariant
+   intensity error of the estimated lights; normal MAE of the robust initialisation with the
+   estimated lights next to the ground-truth ones.
+2. Held-out synthetic stacks (seeds never used in training) of the checkpoint's own recipe, per
+   BRDF family: analytic always, MERL neural fits when ``<data>/merl_nbrdf`` exists, MERL tables
+   with ``--merl-dir``.
+3. Speed of the checkpoint's recipe on this machine: generating one batch (one core, as the
+   training's data worker) against one training step.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import torch
+from omegaconf import OmegaConf
+
+from unps.data.diligent import read_diligent
+from unps.fit import light_errors, with_lights
+from unps.lightnet.bins import decode_lights, encode_lights
+from unps.lightnet.estimate import estimate_lights
+from unps.lightnet.synthesis import LightDataset, MaterialBank
+from unps.lightnet.system import SHIPPED, build_net, light_errors as batch_errors, load_lightnet
+from unps.metrics import normal_metrics
+from unps.solvers.rpca import robust_init
+
+DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
+OBJECTS = {"ball": "DiLiGenT/pmsData/ballPNG", "cat": "DiLiGenT/pmsData_crop/catPNG",
+           "pot1": "DiLiGenT/pmsData_crop/pot1PNG"}
+
+
+def diligent(data: Path, checkpoint):
+    print("DiLiGenT, all 96 images        dir MAE   int err   RPCA(est) °  RPCA(GT) °")
+    for name, relative in OBJECTS.items():
+        if not (data / relative).is_dir():
+            print(f"{name:<6} skipped: {data / relative} not found")
+            continue
+        subject = read_diligent(data / relative)
+        lights = estimate_lights(subject, checkpoint)
+        errors = light_errors(lights, subject)
+        est = robust_init(with_lights(subject, lights), lights.directions)
+        gt = robust_init(subject, subject.light_directions)
+        mae = lambda e: normal_metrics(e.normals, subject.normals, subject.mask)["normal_mae"]  # noqa: E731
+        print(f"{name:<30} {errors['light_dir_mae']:>7.2f}° {errors['light_int_err']:>9.3f} "
+              f"{mae(est):>12.2f} {mae(gt):>11.2f}", flush=True)
+
+
+@torch.no_grad()
+def synthetic(net, config, families: dict, samples: int):
+    recipe = config["recipe"]
+    print(f"held-out synthetic ({recipe['resolution']} px, {recipe['images']} images, {samples} "
+          f"stacks per family)   dir MAE   int err")
+    for family, bank in families.items():
+        ds = LightDataset(samples, resolution=recipe["resolution"], images=recipe["images"],
+                          materials=bank, seed=987_654, family=family)
+        maes, errs = [], []
+        for i in range(0, samples, 8):
+            batch = torch.utils.data.default_collate([ds[j] for j in range(i, min(i + 8, samples))])
+            logits = net(batch["images"], batch["mask"])
+            d, e = decode_lights(logits["azimuth"], logits["elevation"], logits["intensity"], True)
+            mae, err = batch_errors(d, e, batch["directions"], batch["intensities"])
+            maes.append(mae), errs.append(err)
+        print(f"{family:<60} {torch.cat(maes).mean():>7.2f}° {torch.cat(errs).mean():>9.3f}", flush=True)
+
+
+def speed(config, steps: int = 10):
+    recipe = config["recipe"]
+    ds = LightDataset(steps * recipe["batch_size"], resolution=recipe["resolution"],
+                      images=recipe["images"])
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    start = time.perf_counter()
+    batches = [torch.utils.data.default_collate([ds[i * recipe["batch_size"] + j]
+                                                 for j in range(recipe["batch_size"])])
+               for i in range(steps)]
+    data_time = (time.perf_counter() - start) / steps
+    torch.set_num_threads(recipe.get("threads") or threads)
+    net = build_net(config)
+    optimizer = torch.optim.Adam(net.parameters(), 5e-4)
+    start = time.perf_counter()
+    for batch in batches:
+        logits = net(batch["images"], batch["mask"])
+        targets = encode_lights(batch["directions"], batch["intensities"])
+        loss = sum(torch.nn.functional.cross_entropy(logits[k].flatten(0, 1), t.flatten())
+                   for k, t in zip(("azimuth", "elevation", "intensity"), targets))
+        optimizer.zero_grad(), loss.backward(), optimizer.step()
+    step_time = (time.perf_counter() - start) / steps
+    print(f"speed ({recipe['resolution']} px, {recipe['images']} images, batch "
+          f"{recipe['batch_size']}, width {config['light']['width']}): data {data_time:.3f} s "
+          f"per batch on one core, training step {step_time:.3f} s on {torch.get_num_threads()} threads")
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--checkpoint", help="default: the weights shipped with unps")
+    parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
+    parser.add_argument("--merl-dir", type=Path, help="a folder of MERL .binary files")
+    parser.add_argument("--samples", type=int, default=64)
+    args = parser.parse_args()
+
+    net, config = load_lightnet(args.checkpoint)
+    notes = torch.load(args.checkpoint or SHIPPED, weights_only=False).get("notes")
+    print(f"weights: {args.checkpoint or 'shipped'}; recipe: "
+          f"{OmegaConf.to_yaml(OmegaConf.create(config['recipe'])).strip().replace(chr(10), ', ')}")
+    if notes:
+        print(f"trained: {notes}")
+    diligent(args.data, args.checkpoint)
+    families = {"analytic": MaterialBank()}
+    if (args.data / "merl_nbrdf").is_dir():
+        families["neural"] = MaterialBank(analytic=0, neural_dir=str(args.data / "merl_nbrdf"), neural=1)
+    if args.merl_dir:
+        families["merl"] = MaterialBank(analytic=0, merl_dir=str(args.merl_dir), merl=1)
+    synthetic(net, config, families, args.samples)
+    speed(config)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,279 @@
+import math
+
+import numpy as np
+import pytest
+import torch
+from hydra import compose, initialize_config_module
+
+from conftest import SHARED_DATA
+from unps.errors import InputError
+from unps.lightnet import bins
+from unps.lightnet.brdf import (AnalyticBRDF, MERL_SHAPE, half_diff_angles, read_merl_binary,
+                                read_neural_brdf)
+from unps.lightnet.estimate import network_input
+from unps.lightnet.network import LightNet
+from unps.lightnet.synthesis import LightDataset, cast_shadows, maps_from_depth
+from unps.lightnet.system import load_lightnet
+from unps.train import train
+
+
+def unit(v):
+    return torch.nn.functional.normalize(torch.as_tensor(v, dtype=torch.float32), dim=-1)
+
+
+# bins -------------------------------------------------------------------------------------
+
+def test_angles_round_trip():
+    d = unit(torch.randn(200, 3).abs() * torch.tensor([1, 1, 1.0]) * torch.tensor([[1, 1, 1]]))
+    d[:, :2] *= torch.sign(torch.randn(200, 2))
+    np.testing.assert_allclose(bins.angles_to_direction(*bins.direction_to_angles(d)), d, atol=1e-6)
+
+
+def test_bin_encode_decode_round_trip_within_half_a_bin():
+    g = torch.Generator().manual_seed(0)
+    d = unit(torch.randn(500, 3, generator=g).abs() * torch.tensor([1, 1, 2.0]))
+    d[:, :2] *= torch.sign(torch.randn(500, 2, generator=g))
+    e = 0.3 + 1.6 * torch.rand(500, generator=g)
+    e = e / e.mean()
+    az_bin, el_bin, e_bin = bins.encode_lights(d, e)
+    one_hot = lambda index, count: torch.nn.functional.one_hot(index, count).float() * 50  # noqa: E731
+    directions, intensities = bins.decode_lights(one_hot(az_bin, 36), one_hot(el_bin, 36),
+                                                 one_hot(e_bin, 20), soft=False)
+    az, el = bins.direction_to_angles(d)
+    az2, el2 = bins.direction_to_angles(directions)
+    half = math.radians(2.5) + 1e-6
+    assert (az - az2).abs().max() <= half and (el - el2).abs().max() <= half
+    inside = (e >= 0.2) & (e <= 2.0)
+    assert (intensities - e)[inside].abs().max() <= 0.045 + 1e-6
+
+
+def test_soft_decoding_interpolates_between_bins():
+    logits = torch.full((36,), -1e4)
+    logits[[17, 18]] = 0.0                      # equal mass on the two bins around 0°
+    assert bins.decode(logits, *bins.ANGLE_RANGE, soft=True).item() == pytest.approx(0, abs=1e-6)
+    assert bins.decode(logits, *bins.ANGLE_RANGE, soft=False).item() == pytest.approx(math.radians(-2.5), abs=1e-6)
+
+
+# BRDFs ------------------------------------------------------------------------------------
+
+def test_half_diff_angles_known_values():
+    t = math.radians(30)
+    wi, wo = unit([math.sin(t), 0, math.cos(t)]), unit([-math.sin(t), 0, math.cos(t)])
+    th, td, pd = half_diff_angles(wi, wo)
+    assert th.item() == pytest.approx(0, abs=1e-3) and td.item() == pytest.approx(t, abs=1e-5)
+    assert pd.item() == pytest.approx(0, abs=1e-5)
+
+
+def test_analytic_brdf_is_lambertian_without_a_lobe():
+    f = AnalyticBRDF([0.5, 0.25, 0.1], [0, 0, 0], 0.3)
+    value = f(unit([0.3, 0.1, 0.9]), unit([0, 0, 1.0]))
+    np.testing.assert_allclose(value, np.array([0.5, 0.25, 0.1]) / math.pi, rtol=1e-6)
+
+
+def write_merl(path, table):
+    with open(path, "wb") as f:
+        f.write(np.array(MERL_SHAPE, "<i4").tobytes())
+        f.write(table.astype("<f8").tobytes())
+
+
+def test_merl_binary_reader_known_values_at_known_angles(tmp_path):
+    th, td, pd = np.meshgrid(np.arange(90), np.arange(90), np.arange(180), indexing="ij")
+    code = (th * 1_000_000 + td * 1_000 + pd).astype(np.float64)
+    table = np.stack([code, 2 * code, -np.ones_like(code)])      # blue "unmeasured"
+    write_merl(tmp_path / "m.binary", table)
+    brdf = read_merl_binary(tmp_path / "m.binary")
+    t = math.radians(31.5)                                        # θ_h = 0, θ_d = 31.5°, φ_d = 0
+    wi, wo = unit([math.sin(t), 0, math.cos(t)]), unit([-math.sin(t), 0, math.cos(t)])
+    rgb = brdf(wi, wo).numpy()
+    expected = 31 * 1_000                                         # θ_d bin 31 (31°–32°)
+    np.testing.assert_allclose(rgb, [expected / 1500, 2 * expected * 1.15 / 1500, 0], rtol=1e-6)
+
+
+def test_merl_reader_rejects_other_files(tmp_path):
+    (tmp_path / "bad.binary").write_bytes(np.array([1, 2, 3], "<i4").tobytes())
+    with pytest.raises(InputError, match="bad.binary: not a MERL BRDF"):
+        read_merl_binary(tmp_path / "bad.binary")
+    with pytest.raises(InputError, match="not found"):
+        read_merl_binary(tmp_path / "none.binary")
+
+
+def test_neural_brdf_reader_matches_a_plain_evaluation_of_the_weights():
+    path = SHARED_DATA / "merl_nbrdf" / "alum-bronze.h5"
+    if not path.is_file():
+        pytest.skip(f"development data not found at {path}")
+    import h5py
+
+    brdf = read_neural_brdf(path)
+    wi, wo = unit([[0.3, 0.2, 0.9], [-0.5, 0.1, 0.7]]), unit([[0, 0, 1.0], [0.1, 0, 1]])
+    th, td, pd = (a.numpy().astype(np.float64) for a in half_diff_angles(wi, wo))
+    x = np.stack([np.sin(th), 0 * th, np.cos(th), np.sin(td) * np.cos(pd), np.sin(td) * np.sin(pd),
+                  np.cos(td)], -1)
+    with h5py.File(path) as f:
+        for k in (1, 2, 3):
+            x = x @ f[f"dense_{k}/dense_{k}/kernel:0"][()] + f[f"dense_{k}/dense_{k}/bias:0"][()]
+            x = np.maximum(x, 0) if k < 3 else np.expm1(x)
+    np.testing.assert_allclose(brdf(wi, wo).numpy(), np.maximum(x, 0), rtol=1e-4, atol=1e-6)
+
+
+# data -------------------------------------------------------------------------------------
+
+def test_dataset_items_are_a_function_of_seed_and_index():
+    ds = LightDataset(10, resolution=32, images=4, seed=3)
+    a, b, c = ds[5], ds[5], ds[6]
+    for key in ("images", "directions", "intensities", "mask"):
+        torch.testing.assert_close(a[key], b[key])
+    assert not torch.equal(a["images"], c["images"])
+    torch.testing.assert_close(LightDataset(10, resolution=32, images=4, seed=3, offset=5)[1]["images"],
+                               c["images"])
+    assert a["images"].shape == (4, 3, 32, 32) and (a["directions"][:, 2] > 0).all()
+    assert ((a["intensities"] >= 0.2) & (a["intensities"] <= 2)).all()
+
+
+def test_a_pillar_shadows_the_side_away_from_the_light():
+    z = torch.zeros(33, 33)
+    z[14:19, 14:19] = 0.5                                        # a tall block in the middle
+    maps = maps_from_depth(z, torch.ones(33, 33, dtype=torch.bool))
+    shadow = cast_shadows(maps, unit([[0.8, 0, 0.6]]))[0]       # light from +x (the right)
+    assert shadow[16, 5:13].all() and not shadow[16, 20:].any()
+    assert not cast_shadows(maps, unit([[0, 0, 1.0]])).any()
+
+
+def test_bad_dataset_settings():
+    with pytest.raises(InputError, match="multiple of 32"):
+        LightDataset(4, resolution=40)
+    with pytest.raises(InputError, match="images per sample must lie in 1…64"):
+        LightDataset(4, resolution=32, images=65)
+
+
+# training, checkpoints, estimation --------------------------------------------------------
+
+TINY = ["light.width=8", "light.head_width=16", "recipe.resolution=32", "recipe.images=4",
+        "recipe.batch_size=2", "recipe.val_samples=2", "recipe.val_every=2", "recipe.workers=0",
+        "recipe.log_every=1", "recipe.lr_milestones=[1]", "recipe.max_time=null"]
+
+
+def train_config(out, *overrides):
+    with initialize_config_module(config_module="unps.conf", version_base="1.3"):
+        return compose("train", overrides=[f"paths.output_dir={out}", *TINY, *overrides])
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    out = tmp_path_factory.mktemp("train")
+    metrics = train(train_config(out, "recipe.max_steps=2"))
+    return out, metrics
+
+
+def test_two_step_training_writes_checkpoints_and_metrics(trained):
+    out, metrics = trained
+    assert metrics["steps"] == 2 and np.isfinite(metrics["val/direction_mae"])
+    assert (out / "checkpoints" / "last.ckpt").is_file() and (out / "metrics.json").is_file()
+    assert list((out / "tensorboard").glob("events.out.tfevents.*"))
+
+
+def test_checkpoint_restores_the_same_network(trained):
+    out, _ = trained
+    saved = torch.load(out / "checkpoints" / "last.ckpt", weights_only=False)
+    net, config = load_lightnet(out / "checkpoints" / "last.ckpt")
+    assert config["light"]["width"] == 8 and isinstance(net, LightNet)
+    reference = LightNet(8, 16)
+    reference.load_state_dict({k[4:]: v for k, v in saved["state_dict"].items()})
+    x, m = torch.rand(1, 5, 3, 32, 32), torch.ones(1, 1, 32, 32)
+    for key, value in reference.eval()(x, m).items():
+        torch.testing.assert_close(net(x, m)[key], value)
+
+
+def test_an_interrupted_run_resumes_with_its_own_config(tmp_path, monkeypatch):
+    import signal
+
+    from unps.lightnet.system import LightEstimation
+
+    step = LightEstimation.training_step
+
+    def interrupted(self, batch, index):
+        if self.global_step == 3:
+            raise KeyboardInterrupt
+        return step(self, batch, index)
+
+    monkeypatch.setattr(LightEstimation, "training_step", interrupted)
+    handler = signal.getsignal(signal.SIGINT)
+    with pytest.raises(SystemExit):                       # Lightning's graceful shutdown
+        train(train_config(tmp_path / "first", "recipe.max_steps=4"))
+    signal.signal(signal.SIGINT, handler)
+    monkeypatch.undo()
+    last = tmp_path / "first" / "checkpoints" / "last.ckpt"
+    assert torch.load(last, weights_only=False)["global_step"] == 2
+
+    metrics = train(train_config(tmp_path / "again", "light.width=16", f"ckpt_path={last}"))
+    assert metrics["steps"] == 4
+    _, config = load_lightnet(tmp_path / "again" / "checkpoints" / "last.ckpt")
+    assert config["light"]["width"] == 8                  # the saved config, not the override
+
+
+def test_estimated_lights_in_a_fit(trained, tmp_path):
+    from unps.fit import fit
+
+    out, _ = trained
+    with initialize_config_module(config_module="unps.conf", version_base="1.3"):
+        cfg = compose("fit", overrides=[f"paths.output_dir={tmp_path}", "subject=lambertian",
+                                        "subject.size=32", "light=estimated",
+                                        f"light.checkpoint={out / 'checkpoints' / 'last.ckpt'}"])
+    metrics = fit(cfg)
+    assert metrics["light"] == "estimated"
+    assert 0 <= metrics["light_dir_mae"] <= 180 and np.isfinite(metrics["light_int_err"])
+    assert np.loadtxt(tmp_path / "lights.txt").shape == (32, 6)
+
+
+def test_network_input_crops_to_the_object_and_keeps_its_shape():
+    images = np.zeros((2, 40, 60, 3), np.float32)
+    mask = np.zeros((40, 60), bool)
+    mask[10:30, 20:30] = True
+    images[:, mask] = 1
+    x, m = network_input(images, mask, 32)
+    assert x.shape == (1, 2, 3, 32, 32) and m.shape == (1, 1, 32, 32)
+    assert 0.4 < m.mean() < 0.6                             # a 20×10 box in its 20×20 square
+
+
+def test_missing_or_foreign_weights_are_reported(tmp_path):
+    with pytest.raises(InputError, match="weights not found"):
+        load_lightnet(tmp_path / "none.pt")
+    torch.save({"x": 1}, tmp_path / "foreign.pt")
+    with pytest.raises(InputError, match="not a unps light-network checkpoint"):
+        load_lightnet(tmp_path / "foreign.pt")
+
+
+def test_mesh_views_give_normal_and_depth_maps(tmp_path):
+    import trimesh
+
+    from unps.lightnet.synthesis import mesh_views
+
+    trimesh.creation.icosphere(subdivisions=3).export(tmp_path / "ball.ply")
+    (tmp_path / "notes.txt").write_text("not a mesh")
+    views = mesh_views(tmp_path, resolution=32, views=2, seed=0)
+    assert len(views) == 2
+    for maps in views:
+        assert maps.normals.shape == (32, 32, 3) and maps.mask.sum() > 300
+        np.testing.assert_allclose(maps.normals[maps.mask].norm(dim=-1), 1, atol=1e-4)
+        assert maps.depth[maps.mask].max() > 0.5                 # a sphere of radius ~0.9
+    ds = LightDataset(4, resolution=32, images=3, meshes=views, mesh_fraction=1.0)
+    assert ds[0]["mask"].sum() in (views[0].mask.sum(), views[1].mask.sum())
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputError, match="no .obj or .ply meshes"):
+        mesh_views(tmp_path / "empty", resolution=32, views=1, seed=0)
+
+
+def test_material_bank_families_and_errors(tmp_path):
+    from unps.lightnet.synthesis import MaterialBank
+
+    with pytest.raises(InputError, match="merl has weight 1 but its folder"):
+        MaterialBank(merl_dir=str(tmp_path / "nowhere"), merl=1)
+    with pytest.raises(InputError, match="no .binary files"):
+        MaterialBank(merl_dir=str(tmp_path), merl=1)
+    folder = SHARED_DATA / "merl_nbrdf"
+    if not folder.is_dir():
+        pytest.skip(f"development data not found at {folder}")
+    bank = MaterialBank(analytic=0, neural_dir=str(folder), neural=1)
+    family, brdf = bank.draw(torch.Generator().manual_seed(0))
+    assert family == "neural"
+    value = brdf(unit([[0.2, 0.1, 0.97]]), unit([[0, 0, 1.0]]))
+    assert value.shape == (1, 3) and (value > 0).all()
