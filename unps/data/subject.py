@@ -245,13 +245,13 @@ class Subject:
         f = int(factor)
         if f == 1:
             return self
-        weight = _blocks(self.mask.astype(np.float32), f)          # (h, w, f*f)
+        weight = split_blocks(self.mask.astype(np.float32), f)          # (h, w, f*f)
         coverage = weight.mean(-1)
         total = np.maximum(weight.sum(-1), 1e-12)
         on_object = weight.sum(-1) > 0
 
         def average(a):  # (..., H, W, C) -> (..., h, w, C), object pixels only
-            blocks = _blocks(a, f)                                  # (..., h, w, C, f*f)
+            blocks = split_blocks(a, f)                                  # (..., h, w, C, f*f)
             masked = (blocks * weight[..., None, :]).sum(-1) / total[..., None]
             return np.where(on_object[..., None], masked, blocks.mean(-1)).astype(np.float32)
 
@@ -273,7 +273,7 @@ def _index(a: np.ndarray | None, index) -> np.ndarray | None:
     return None if a is None else a[index]
 
 
-def _blocks(a: np.ndarray, f: int) -> np.ndarray:
+def split_blocks(a: np.ndarray, f: int) -> np.ndarray:
     """Split the (H, W) axes of a (H, W) or (H, W, C) array into f×f blocks.
 
     Returns (h, w, f*f) or (h, w, C, f*f) with h = ceil(H/f), w = ceil(W/f); padding is 0.

@@ -1,0 +1,156 @@
+"""Nayar's interreflection model (Nayar, Ikeuchi & Kanade 1991; supplementary Eqs. 2–3, §5).
+
+A Lambertian surface is cut into m facets. Facet i's radiance is its own direct radiance plus
+what it receives from every other facet:
+
+    L = L_s + P K L   ⇒   L = (I − P K)⁻¹ L_s,
+
+with P = diag(ρ) the facet albedos and K the interreflection kernel. In terms of facet
+matrices (rows ρᵢ·nᵢ), the observed, "pseudo" facets are F_p = (I − P K)⁻¹ F, so the true ones
+are F = (I − P K) F_p.
+
+Frame: x right (+col), y up (−row), z toward the camera; facet positions in pixel units of
+the facet grid (depth from :func:`unps.geometry.integrate_normals` on that grid).
+"""
+
+from __future__ import annotations
+
+import logging
+
+import cv2
+import numpy as np
+from scipy.ndimage import map_coordinates
+
+from unps.data.subject import Subject, split_blocks
+from unps.geometry import integrate_normals
+from unps.solvers.woodham import (Estimate, lambertian_least_squares, normals_from_scaled,
+                                  rgb_albedo, to_maps)
+
+log = logging.getLogger(__name__)
+
+
+def facet_positions(depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """(m, 3) centres of the object's facets: x = col, y = −row, z = depth."""
+    rows, cols = np.nonzero(mask)
+    return np.stack([cols, -rows, depth[mask]], 1).astype(np.float64)
+
+
+def visibility(depth: np.ndarray, mask: np.ndarray, steps: int = 16, chunk: int = 256) -> np.ndarray:
+    """(m, m) bool: whether the segment between two facets clears the surface.
+
+    The segment is sampled at ``steps`` interior points; it is blocked where the depth map,
+    interpolated bilinearly (off the object it never blocks), stands above it by more than
+    0.05 pixel. Rows are processed ``chunk`` facets at a time to bound memory.
+    """
+    rows, cols = np.nonzero(mask)
+    z = depth[mask]
+    surface = np.where(mask, depth, -1e9)
+    t = np.linspace(0, 1, steps + 2)[1:-1, None, None]
+    visible = np.empty((len(z), len(z)), bool)
+    for start in range(0, len(z), chunk):
+        i = slice(start, start + chunk)
+        r = rows[i, None] + t * (rows[None, :] - rows[i, None])
+        c = cols[i, None] + t * (cols[None, :] - cols[i, None])
+        height = z[i, None] + t * (z[None, :] - z[i, None])
+        sampled = map_coordinates(surface, [r.ravel(), c.ravel()], order=1, mode="nearest")
+        visible[i] = ~(sampled.reshape(r.shape) > height + 0.05).any(0)
+    return visible
+
+
+def interreflection_kernel(depth: np.ndarray, normals: np.ndarray, mask: np.ndarray,
+                           occlusion: bool = True) -> np.ndarray:
+    """Nayar's kernel between the object's facets, (m, m).
+
+        K_ij = V_ij · max(nᵢ·d, 0) · max(nⱼ·(−d), 0) / (π |d|⁴) · Aⱼ,   d = xⱼ − xᵢ,
+
+    i.e. cos θᵢ cos θⱼ / (π r²) times facet j's area Aⱼ = 1 / nⱼ_z (a unit pixel's footprint
+    on a facet tilted by θ). V_ij is 1 when the segment between the facets clears the surface
+    (:func:`visibility`), and the orientation terms are 0 when either facet faces away from the
+    other, so K_ii = 0 and K is zero between facets that cannot see each other. Reciprocity
+    holds in the sense K_ij·Aᵢ = K_ji·Aⱼ (the form-factor relation), not K_ij = K_ji.
+
+    Args:
+        depth: (h, w) in pixel units of this grid.
+        normals: (h, w, 3) unit normals.
+        mask: (h, w) bool, m object pixels.
+        occlusion: include the visibility term.
+    """
+    x = facet_positions(depth, mask)
+    n = normals[mask].astype(np.float64)
+    d = x[None, :, :] - x[:, None, :]                                  # d[i, j] = x_j − x_i
+    r2 = (d ** 2).sum(-1)
+    np.fill_diagonal(r2, np.inf)
+    cos_i = np.maximum(np.einsum("ik,ijk->ij", n, d), 0)
+    cos_j = np.maximum(-np.einsum("jk,ijk->ij", n, d), 0)
+    area = 1 / np.maximum(n[:, 2], 0.05)
+    k = cos_i * cos_j / (np.pi * r2 ** 2) * area[None, :]
+    if occlusion:
+        k *= visibility(depth, mask)
+    return k
+
+
+def remove_interreflections(pseudo: np.ndarray, kernel: np.ndarray, albedo: np.ndarray) -> np.ndarray:
+    """F = (I − P K) F_p: facets without the light they received from each other.
+
+    Args:
+        pseudo: (m, 3) observed facets ρ_p·n_p.
+        kernel: (m, m) K.
+        albedo: (m,) ρ, the diagonal of P.
+    """
+    return pseudo - albedo[:, None] * (kernel @ pseudo)
+
+
+def block_mean(values: np.ndarray, mask: np.ndarray, factor: int) -> tuple[np.ndarray, np.ndarray]:
+    """Average (H, W, C) values over the object in factor×factor blocks; (h, w, C) and the block mask."""
+    weight = split_blocks(mask.astype(np.float64), factor)
+    blocks = split_blocks(values.astype(np.float64), factor)
+    total = weight.sum(-1)
+    mean = (blocks * weight[..., None, :]).sum(-1) / np.maximum(total, 1e-12)[..., None]
+    return mean, weight.mean(-1) >= 0.5
+
+
+def upsample(values: np.ndarray, mask: np.ndarray, shape: tuple[int, int], factor: int) -> np.ndarray:
+    """Bilinear upsampling of (h, w, C) facet values by ``factor`` to ``shape``, normalised by
+    the facet mask so that values off the object do not pull the edges toward zero."""
+    size = (mask.shape[1] * factor, mask.shape[0] * factor)
+    weight = cv2.resize(mask.astype(np.float64), size, interpolation=cv2.INTER_LINEAR)
+    spread = cv2.resize(values * mask[..., None], size, interpolation=cv2.INTER_LINEAR)
+    out = spread / np.maximum(weight, 1e-6)[..., None]
+    return out[: shape[0], : shape[1]]
+
+
+def nayar(subject: Subject, light_directions: np.ndarray, iterations: int = 15,
+          downsample: int = 4, occlusion: bool = True) -> Estimate:
+    """Nayar's shape from interreflections, as the paper's baseline (supplementary §5).
+
+    Woodham's least squares gives the pseudo facets F_p (scaled normals ρ_p·n_p). On a facet
+    grid ``downsample`` times coarser, each iteration integrates the current normals into
+    depth, computes K, and sets F = (I − P K) F_p with P from the current albedo. The final
+    correction P K F_p is smooth, so it is upsampled and subtracted from the full-resolution
+    pseudo facets, which keeps their detail.
+
+    Args:
+        subject: images divided by their intensities.
+        light_directions: (n, 3) unit, surface to light.
+        iterations: Nayar's iterations (15 in the paper's comparison).
+        downsample: facet grid factor (the interreflection kernel is O(m²) in facets).
+        occlusion: include visibility in K.
+    """
+    mask = subject.mask
+    pixels = subject.images[:, mask]
+    scaled = lambertian_least_squares(pixels.mean(-1), light_directions)             # (M, 3)
+    pseudo_full = to_maps(scaled, mask).astype(np.float64)
+    pseudo, facets = block_mean(pseudo_full, mask, downsample)
+    pseudo_f = pseudo[facets]
+    current = pseudo_f
+    log.info("nayar: %d facets at ×%d, %d iterations", facets.sum(), downsample, iterations)
+    for _ in range(iterations):
+        normals, albedo = normals_from_scaled(current)
+        depth = integrate_normals(to_maps(normals, facets), facets)
+        kernel = interreflection_kernel(depth, to_maps(normals, facets), facets, occlusion)
+        current = remove_interreflections(pseudo_f, kernel, albedo)
+    correction = upsample(to_maps(pseudo_f - current, facets).astype(np.float64), facets,
+                          mask.shape, downsample)
+    corrected = pseudo_full - correction
+    normals, _ = normals_from_scaled(corrected[mask])
+    return Estimate(to_maps(normals, mask), to_maps(rgb_albedo(pixels, normals, light_directions), mask))
