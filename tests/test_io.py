@@ -45,6 +45,17 @@ def test_srgb_to_linear_known_values():
                                [0, 0.04045 / 12.92, 0.21404, 1.0], rtol=1e-4)
 
 
+def test_atomic_files_get_the_usual_permissions(tmp_path):
+    import os
+    import stat
+
+    with atomic_path(tmp_path / "a.json") as tmp:
+        tmp.write_text("{}")
+    mask = os.umask(0)
+    os.umask(mask)
+    assert stat.S_IMODE((tmp_path / "a.json").stat().st_mode) == 0o666 & ~mask
+
+
 def test_atomic_path_keeps_the_old_file_when_writing_fails(tmp_path):
     target = tmp_path / "metrics.json"
     target.write_text("old")

@@ -277,3 +277,17 @@ def test_material_bank_families_and_errors(tmp_path):
     assert family == "neural"
     value = brdf(unit([[0.2, 0.1, 0.97]]), unit([[0, 0, 1.0]]))
     assert value.shape == (1, 3) and (value > 0).all()
+
+
+def test_shipped_weights_load_by_default_and_estimate_a_sphere():
+    from unps.data.analytic import render_lambertian
+    from unps.lightnet.system import SHIPPED
+    from unps.metrics import light_direction_mae
+
+    assert SHIPPED.is_file() and SHIPPED.stat().st_size <= 20e6
+    notes = torch.load(SHIPPED, weights_only=False)["notes"]
+    assert notes["command"].startswith("python -m unps.train") and notes["steps"] > 0
+    subject = render_lambertian("sphere", size=64, n_lights=24, seed=1)
+    lights = estimate_lights(subject)
+    assert light_direction_mae(lights.directions, subject.light_directions) < 8
+    np.testing.assert_allclose(lights.intensities.mean(), 1, rtol=1e-5)
