@@ -10,7 +10,7 @@ from unps.errors import InputError
 from unps.lightnet import bins
 from unps.lightnet.brdf import (AnalyticBRDF, MERL_SHAPE, half_diff_angles, read_merl_binary,
                                 read_neural_brdf)
-from unps.lightnet.estimate import network_input
+from unps.lightnet.estimate import estimate_lights, network_input
 from unps.lightnet.network import LightNet
 from unps.lightnet.synthesis import LightDataset, cast_shadows, maps_from_depth
 from unps.lightnet.system import load_lightnet
