@@ -291,3 +291,17 @@ def test_shipped_weights_load_by_default_and_estimate_a_sphere():
     lights = estimate_lights(subject)
     assert light_direction_mae(lights.directions, subject.light_directions) < 8
     np.testing.assert_allclose(lights.intensities.mean(), 1, rtol=1e-5)
+
+
+def test_fine_tuning_starts_from_given_weights(trained, tmp_path):
+    out, _ = trained
+    start, _ = load_lightnet(out / "checkpoints" / "last.ckpt")
+    cfg = train_config(tmp_path, "recipe.max_steps=1", "recipe.lr=1e-12",
+                       f"init_weights={out / 'checkpoints' / 'last.ckpt'}")
+    train(cfg)
+    tuned, _ = load_lightnet(tmp_path / "checkpoints" / "last.ckpt")
+    for a, b in zip(start.parameters(), tuned.parameters()):
+        torch.testing.assert_close(a, b, atol=1e-6, rtol=0)
+    with pytest.raises(InputError, match="fine-tuning needs the same architecture"):
+        train(train_config(tmp_path / "other", "light.width=16",
+                           f"init_weights={out / 'checkpoints' / 'last.ckpt'}"))

@@ -43,6 +43,19 @@ def datasets(cfg: DictConfig, start_step: int = 0):
     return train, val
 
 
+def initial_weights(path: str, cfg: DictConfig):
+    """The network of ``path`` to fine-tune, checked to be the one ``cfg.light`` describes."""
+    from unps.lightnet.system import load_lightnet
+
+    net, saved = load_lightnet(path)
+    wanted = OmegaConf.to_container(cfg.light, resolve=True)
+    if saved["light"] != wanted:
+        raise InputError(f"{path}: its network {saved['light']} differs from light={wanted}; "
+                         f"fine-tuning needs the same architecture")
+    log.info("starting from the weights in %s", path)
+    return net.train()
+
+
 def train(cfg: DictConfig) -> dict:
     """Train (or resume) and return the final validation metrics."""
     import lightning as L
@@ -72,7 +85,10 @@ def train(cfg: DictConfig) -> dict:
     train_set, val_set = datasets(cfg, start_step)
     loader = dict(batch_size=cfg.recipe.batch_size, num_workers=cfg.recipe.workers,
                   persistent_workers=cfg.recipe.workers > 0)
-    system = LightEstimation(instantiate(cfg.light), lr=cfg.recipe.lr,
+    net = instantiate(cfg.light)
+    if cfg.init_weights and not cfg.ckpt_path:
+        net = initial_weights(cfg.init_weights, cfg)
+    system = LightEstimation(net, lr=cfg.recipe.lr,
                              lr_milestones=tuple(cfg.recipe.lr_milestones),
                              lr_gamma=cfg.recipe.lr_gamma, soft_decode=cfg.soft_decode,
                              config=OmegaConf.to_container(cfg, resolve=True))
