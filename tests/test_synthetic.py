@@ -159,3 +159,23 @@ def test_render_cli_and_unknown_subjects(tmp_path):
 
     real = run("unps.render", "subject=lambertian", f"hydra.run.dir={tmp_path / 'r2'}", cwd=tmp_path)
     assert real.returncode == 2 and "renders synthetic subjects only" in real.stdout + real.stderr
+
+
+def test_ground_truth_drops_pixels_whose_normals_are_not_finite(monkeypatch):
+    from pathlib import Path
+
+    import mitsuba as mi
+
+    import unps.synthetic.render as render
+
+    truth = np.zeros((4, 4, 9), np.float32)
+    truth[..., 0] = 1                                   # fully covered
+    truth[..., 5] = 1                                   # n = +z
+    truth[..., 8] = 3.0                                 # z = 3 (view units)
+    truth[1, 2, 3:6] = np.nan                           # what a degenerate mesh face can give
+    render.set_variant("scalar_rgb")
+    monkeypatch.setattr(render, "_scene", lambda *args, **kwargs: None)
+    monkeypatch.setattr(mi, "render", lambda *args, **kwargs: truth)
+    normals, depth, mask = render._ground_truth(Path("unused.ply"), 4, seed=0)
+    assert not mask[1, 2] and mask.sum() == 15
+    assert np.isfinite(normals).all() and np.isnan(depth[1, 2]) and depth[0, 0] == pytest.approx(6.0)

@@ -35,7 +35,7 @@ def datasets(cfg: DictConfig, start_step: int = 0):
                   lights_per_shape=data.lights_per_shape, max_zenith_deg=data.max_zenith_deg,
                   materials=MaterialBank(**data.materials), meshes=meshes,
                   mesh_fraction=data.mesh_fraction, texture=data.texture,
-                  perturbation=data.perturbation)
+                  perturbation=data.perturbation, saturation=data.saturation)
     done = start_step * recipe.batch_size
     train = LightDataset(length=max(recipe.max_steps * recipe.batch_size - done, recipe.batch_size),
                          seed=cfg.seed, offset=done, **common)

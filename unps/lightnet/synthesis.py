@@ -224,6 +224,9 @@ class LightDataset(Dataset):
         texture: largest relative albedo variation over the surface.
         perturbation: half-width of the uniform noise added to images scaled to a 99th
             percentile of 1.
+        saturation: the level, in units of that 99th percentile, where the simulated camera
+            saturates (measured mirror-like materials otherwise put highlights hundreds of times
+            above the rest of the stack); None keeps every value.
         family: force one material family (for per-family validation).
         offset: item i is sample ``offset + i`` (a resumed run continues where it stopped).
     """
@@ -232,8 +235,8 @@ class LightDataset(Dataset):
                  lights_per_shape: int = 64, max_zenith_deg: float = 70.0,
                  materials: MaterialBank | None = None, meshes: list[ShapeMaps] | None = None,
                  mesh_fraction: float = 0.0, texture: float = 0.3, perturbation: float = 0.025,
-                 intensity_range: tuple[float, float] = (0.2, 2.0), seed: int = 0,
-                 family: str | None = None, offset: int = 0):
+                 intensity_range: tuple[float, float] = (0.2, 2.0), saturation: float | None = 4.0,
+                 seed: int = 0, family: str | None = None, offset: int = 0):
         if resolution % 32 or resolution < 32:
             raise InputError(f"resolution must be a multiple of 32, got {resolution}")
         if not 1 <= images <= lights_per_shape:
@@ -244,7 +247,7 @@ class LightDataset(Dataset):
         self.meshes, self.mesh_fraction = meshes or [], mesh_fraction if meshes else 0.0
         self.texture, self.perturbation = texture, perturbation
         self.intensity_range, self.seed, self.family = intensity_range, seed, family
-        self.offset = offset
+        self.offset, self.saturation = offset, saturation
 
     def __len__(self) -> int:
         return self.length
@@ -273,6 +276,8 @@ class LightDataset(Dataset):
         values = images[:, :, maps.mask].flatten()
         level = torch.quantile(values[:: max(1, len(values) // 8192)], 0.99).clamp_min(1e-8)
         images = images / level
+        if self.saturation is not None:
+            images = images.clamp(max=self.saturation)
         images = images + self.perturbation * (2 * torch.rand(images.shape, generator=g) - 1)
         images = images * maps.mask
         return {"images": images.float(), "mask": maps.mask[None].float(),

@@ -194,7 +194,10 @@ def _ground_truth(mesh_file: Path, resolution: int, seed: int
                  resolution, AOV_SPP, "independent", light=False)
     truth = np.array(mi.render(aov, seed=seed))
     coverage, normals, position = truth[..., 0], truth[..., 3:6], truth[..., 6:9]
-    mask = coverage > FULL_COVERAGE
+    # degenerate faces of a foreign mesh can leave NaN normals: such pixels are not ground truth
+    finite = np.isfinite(normals).all(-1) & np.isfinite(position[..., 2])
+    mask = (coverage > FULL_COVERAGE) & finite
+    normals = np.where(finite[..., None], normals, 0)
     normals = normals / np.maximum(np.linalg.norm(normals, axis=-1), 1e-12)[..., None]
     normals *= np.where(normals[..., 2:] < 0, -1, 1)            # the side the camera sees
     normals[~mask] = 0
