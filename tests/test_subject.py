@@ -97,6 +97,15 @@ def test_downsample_averages_object_pixels_only_and_pads():
     np.testing.assert_allclose(s.normals[0, 0], np.array([1, 0, 2]) / np.sqrt(5), rtol=1e-6)
 
 
+def test_downsample_keeps_depth_finite_where_background_is_nan():
+    mask = np.zeros((4, 4), bool)
+    mask[:3, :3] = True
+    depth = np.where(mask, 2.0, np.nan)
+    s = make(n=1, h=4, w=4, mask=mask, depth=depth, light_directions=[[0, 0, 1.0]]).downsample(2)
+    assert s.mask.tolist() == [[True, True], [True, False]]
+    np.testing.assert_allclose(s.depth[s.mask], 1.0)            # 2 pixels of depth at pitch ×2
+
+
 def test_downsample_rejects_bad_factors():
     with pytest.raises(InputError, match="whole number >= 1, got 0"):
         make().downsample(0)

@@ -26,7 +26,7 @@ from unps.fit import light_errors, with_lights
 from unps.lightnet.bins import decode_lights, encode_lights
 from unps.lightnet.estimate import estimate_lights
 from unps.lightnet.synthesis import LightDataset, MaterialBank
-from unps.lightnet.system import SHIPPED, build_net, light_errors as batch_errors, load_lightnet
+from unps.lightnet.system import SHIPPED, batch_light_errors, build_net, load_lightnet
 from unps.metrics import normal_metrics
 from unps.solvers.rpca import robust_init
 
@@ -64,7 +64,7 @@ def synthetic(net, config, families: dict, samples: int):
             batch = torch.utils.data.default_collate([ds[j] for j in range(i, min(i + 8, samples))])
             logits = net(batch["images"], batch["mask"])
             d, e = decode_lights(logits["azimuth"], logits["elevation"], logits["intensity"], True)
-            mae, err = batch_errors(d, e, batch["directions"], batch["intensities"])
+            mae, err = batch_light_errors(d, e, batch["directions"], batch["intensities"])
             maes.append(mae), errs.append(err)
         print(f"{family:<60} {torch.cat(maes).mean():>7.2f}° {torch.cat(errs).mean():>9.3f}", flush=True)
 

@@ -245,17 +245,12 @@ class Subject:
         f = int(factor)
         if f == 1:
             return self
-        weight = split_blocks(self.mask.astype(np.float32), f)          # (h, w, f*f)
-        coverage = weight.mean(-1)
-        total = np.maximum(weight.sum(-1), 1e-12)
-        on_object = weight.sum(-1) > 0
 
-        def average(a):  # (..., H, W, C) -> (..., h, w, C), object pixels only
-            blocks = split_blocks(a, f)                                  # (..., h, w, C, f*f)
-            masked = (blocks * weight[..., None, :]).sum(-1) / total[..., None]
-            return np.where(on_object[..., None], masked, blocks.mean(-1)).astype(np.float32)
+        def average(a):  # (H, W, C) -> (h, w, C) float32
+            return block_mean(a, self.mask, f)[0].astype(np.float32)
 
         images = np.stack([average(im) for im in self.images])
+        mask = block_mean(self.images[0], self.mask, f)[1]
         normals = depth = None
         if self.normals is not None:
             normals = average(self.normals)
@@ -264,8 +259,7 @@ class Subject:
         if self.depth is not None:
             depth = average(self.depth[..., None])[..., 0] / f
         frame = dataclasses.replace(self.frame, step=self.frame.step * f)
-        return self.replace(images=images, mask=coverage >= 0.5, normals=normals, depth=depth,
-                            frame=frame)
+        return self.replace(images=images, mask=mask, normals=normals, depth=depth, frame=frame)
 
 
 def _index(a: np.ndarray | None, index) -> np.ndarray | None:
@@ -273,7 +267,25 @@ def _index(a: np.ndarray | None, index) -> np.ndarray | None:
     return None if a is None else a[index]
 
 
-def split_blocks(a: np.ndarray, f: int) -> np.ndarray:
+def block_mean(values: np.ndarray, mask: np.ndarray, factor: int) -> tuple[np.ndarray, np.ndarray]:
+    """Average (H, W, C) values over the object's pixels in factor×factor blocks.
+
+    Blocks with no object pixel get the plain mean. The grid is padded with background to a
+    multiple of ``factor``.
+
+    Returns:
+        (h, w, C) float64 means and the (h, w) bool mask of blocks at least half on the object.
+    """
+    weight = _split_blocks(mask.astype(np.float64), factor)                 # (h, w, f*f)
+    blocks = _split_blocks(np.asarray(values, np.float64), factor)          # (h, w, C, f*f)
+    total = weight.sum(-1)
+    on = weight[..., None, :] > 0                      # NaN off the object (e.g. depth) must not leak in
+    masked = np.where(on, blocks * weight[..., None, :], 0).sum(-1) / np.maximum(total, 1e-12)[..., None]
+    mean = np.where((total > 0)[..., None], masked, blocks.mean(-1))
+    return mean, weight.mean(-1) >= 0.5
+
+
+def _split_blocks(a: np.ndarray, f: int) -> np.ndarray:
     """Split the (H, W) axes of a (H, W) or (H, W, C) array into f×f blocks.
 
     Returns (h, w, f*f) or (h, w, C, f*f) with h = ceil(H/f), w = ceil(W/f); padding is 0.

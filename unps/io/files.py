@@ -20,6 +20,7 @@ def _umask() -> int:
 
 
 FILE_MODE = 0o666 & ~_umask()   # what open() would give a new file; mkstemp gives 0600
+DIR_MODE = 0o777 & ~_umask()    # likewise for mkdir; mkdtemp gives 0700
 
 
 @contextlib.contextmanager
@@ -51,7 +52,7 @@ def atomic_dir(path: str | os.PathLike, overwrite: bool = False) -> Iterator[Pat
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
     try:
         yield tmp
-        os.chmod(tmp, 0o777 & ~_umask())
+        os.chmod(tmp, DIR_MODE)
         if path.exists():
             shutil.rmtree(path)
         os.replace(tmp, path)

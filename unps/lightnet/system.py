@@ -19,7 +19,7 @@ FAMILIES = ("analytic", "merl", "neural")
 SHIPPED = Path(__file__).parent / "weights" / "lightnet.pt"
 
 
-def light_errors(directions: torch.Tensor, intensities: torch.Tensor, true_directions: torch.Tensor,
+def batch_light_errors(directions: torch.Tensor, intensities: torch.Tensor, true_directions: torch.Tensor,
                  true_intensities: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Per-sample direction MAE (degrees) and scale-invariant intensity error.
 
@@ -65,7 +65,7 @@ class LightEstimation(L.LightningModule):
         loss = sum(losses.values())
         directions, intensities = decode_lights(logits["azimuth"], logits["elevation"],
                                                 logits["intensity"], self.soft_decode)
-        mae, int_err = light_errors(directions, intensities, batch["directions"],
+        mae, int_err = batch_light_errors(directions, intensities, batch["directions"],
                                     batch["intensities"])
         log = dict(batch_size=len(mae), prog_bar=True, on_step=stage == "train",
                    on_epoch=stage != "train")

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 from scipy.ndimage import map_coordinates
 
-from unps.data.subject import Subject, split_blocks
+from unps.data.subject import Subject, block_mean
 from unps.geometry import integrate_normals
 from unps.solvers.woodham import (Estimate, lambertian_least_squares, normals_from_scaled,
                                   rgb_albedo, to_maps)
@@ -98,15 +98,6 @@ def remove_interreflections(pseudo: np.ndarray, kernel: np.ndarray, albedo: np.n
         albedo: (m,) ρ, the diagonal of P.
     """
     return pseudo - albedo[:, None] * (kernel @ pseudo)
-
-
-def block_mean(values: np.ndarray, mask: np.ndarray, factor: int) -> tuple[np.ndarray, np.ndarray]:
-    """Average (H, W, C) values over the object in factor×factor blocks; (h, w, C) and the block mask."""
-    weight = split_blocks(mask.astype(np.float64), factor)
-    blocks = split_blocks(values.astype(np.float64), factor)
-    total = weight.sum(-1)
-    mean = (blocks * weight[..., None, :]).sum(-1) / np.maximum(total, 1e-12)[..., None]
-    return mean, weight.mean(-1) >= 0.5
 
 
 def upsample(values: np.ndarray, mask: np.ndarray, shape: tuple[int, int], factor: int) -> np.ndarray:
