@@ -22,7 +22,8 @@ def config(tmp_path, *overrides):
 
 @pytest.mark.parametrize("method", ["woodham", "rpca"])
 def test_fit_writes_every_output(tmp_path, method):
-    metrics = fit(config(tmp_path, f"method={method}", "subject=lambertian", "subject.size=32"))
+    metrics = fit(config(tmp_path, f"method={method}", "light=gt", "subject=lambertian",
+                            "subject.size=32"))
     assert OUTPUTS <= {p.name for p in tmp_path.iterdir()}
     saved = json.loads((tmp_path / "metrics.json").read_text())
     assert saved["method"] == method and saved["light"] == "gt" and saved["n_images"] == 32
@@ -41,7 +42,7 @@ def test_fit_on_a_diligent_folder_with_crop_and_downsample(tmp_path):
     write_diligent(render_lambertian("bumps", size=40, n_lights=16, seed=5), tmp_path / "objPNG")
     out = tmp_path / "run"
     metrics = fit(config(out, "subject=diligent", f"subject.root={tmp_path / 'objPNG'}",
-                         "subject.crop_margin=2", "subject.downsample=2", "method=woodham"))
+                         "subject.crop_margin=2", "subject.downsample=2", "method=woodham", "light=gt"))
     assert metrics["subject"] == "lambertian-bumps"
     saved = json.loads((out / "metrics.json").read_text())
     assert saved["frame"]["step"] == 2 and saved["frame"]["top"] > 0
@@ -64,8 +65,8 @@ def run_cli(*args, cwd):
 
 
 def test_cli_runs_from_any_folder_and_reports_bad_input(tmp_path):
-    done = run_cli("subject=lambertian", "subject.size=24", f"hydra.run.dir={tmp_path / 'run'}",
-                   cwd=tmp_path)
+    done = run_cli("subject=lambertian", "subject.size=24", "preset.steps=30", "preset.lr_drop_at=27",
+                   f"hydra.run.dir={tmp_path / 'run'}", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "run" / "metrics.json").is_file()
 
@@ -78,7 +79,7 @@ def test_cli_runs_from_any_folder_and_reports_bad_input(tmp_path):
 
 
 def test_cli_multirun_sweeps_methods(tmp_path):
-    done = run_cli("-m", "method=woodham,rpca", "subject=lambertian", "subject.size=24",
+    done = run_cli("-m", "method=woodham,rpca", "light=gt", "subject=lambertian", "subject.size=24",
                    f"hydra.sweep.dir={tmp_path / 'sweep'}", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     methods = sorted(json.loads(p.read_text())["method"]

@@ -216,7 +216,7 @@ def test_estimated_lights_in_a_fit(trained, tmp_path):
     out, _ = trained
     with initialize_config_module(config_module="unps.conf", version_base="1.3"):
         cfg = compose("fit", overrides=[f"paths.output_dir={tmp_path}", "subject=lambertian",
-                                        "subject.size=32", "light=estimated",
+                                        "subject.size=32", "light=estimated", "method=rpca",
                                         f"light.checkpoint={out / 'checkpoints' / 'last.ckpt'}"])
     metrics = fit(cfg)
     assert metrics["light"] == "estimated"

@@ -13,8 +13,14 @@ class InputError(ValueError):
     """
 
 
+class Diverged(RuntimeError):
+    """An optimisation stopped being finite. The message says where the last good state is;
+    the command-line entry points print it without a traceback and exit with status 3."""
+
+
 def exit_on_bad_input(task):
-    """Wrap a ``task(cfg)`` entry point: bad input is logged in one line and exits with status 2."""
+    """Wrap a ``task(cfg)`` entry point: bad input is logged in one line and exits with status 2,
+    a diverged optimisation likewise with status 3."""
     from omegaconf.errors import MissingMandatoryValue
 
     @functools.wraps(task)
@@ -24,5 +30,8 @@ def exit_on_bad_input(task):
         except (InputError, MissingMandatoryValue) as e:
             logging.getLogger(task.__module__).error("%s", e)
             sys.exit(2)
+        except Diverged as e:
+            logging.getLogger(task.__module__).error("%s", e)
+            sys.exit(3)
 
     return run

@@ -1,7 +1,8 @@
 """``python -m unps.fit``: normals, depth and albedo of one subject.
 
-    python -m unps.fit                                  # Face, rendered on first use
-    python -m unps.fit subject=Vase noise=0.1 method=woodham
+    python -m unps.fit                                  # Face, rendered on first use; method=unps
+    python -m unps.fit subject=Vase noise=0.1 light=gt preset=paper
+    python -m unps.fit subject=Vase method=woodham light=gt
     python -m unps.fit subject=diligent subject.root=…/pmsData/ballPNG method=woodham
     python -m unps.fit subject=folder subject.root=~/captures/mug
     python -m unps.fit -m method=woodham,rpca subject=diligent subject.root=…
@@ -14,15 +15,17 @@ from __future__ import annotations
 
 import logging
 import time
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import hydra
 from hydra.utils import instantiate
+import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from unps.data.subject import Subject, add_noise
-from unps.errors import exit_on_bad_input
+from unps.errors import InputError, exit_on_bad_input
 from unps.geometry import integrate_normals
 from unps.lights import Lights
 from unps.metrics import angular_error, light_direction_mae, light_intensity_error, normal_metrics
@@ -31,13 +34,15 @@ log = logging.getLogger("unps.fit")
 
 
 def build(node: DictConfig) -> tuple[str, Any]:
-    """Instantiate a config-group node; its ``name`` labels it and is not passed to the target.
+    """Instantiate a config-group node; its ``name`` labels it and is not passed to the target
+    (nor is ``refine``, which ``light=refine`` sets for the method rather than the estimator).
 
     Nodes are partial (``_partial_: true``): the callable they give raises its own errors
     when called, rather than Hydra's wrapped instantiation error.
     """
     spec = OmegaConf.to_container(node, resolve=True)
     name = spec.pop("name")
+    spec.pop("refine", None)
     return name, instantiate(spec)
 
 
@@ -58,13 +63,20 @@ def fit(cfg: DictConfig) -> dict:
     start = time.perf_counter()
     subject = instantiate(cfg.subject, _partial_=True)()   # called here so errors reach the user
     subject, noise_reference = add_noise(subject, cfg.noise, seed=cfg.seed)
+    original = subject
     light_name, light_source = build(cfg.light)
+    method_name, method = build(cfg.method)
+    refine = bool(cfg.light.get("refine", False))
+    if refine and method_name != "unps":
+        raise InputError(f"light=refine refines the lights inside the neural inverse rendering, "
+                         f"so it needs method=unps, not method={method_name}")
     lights = light_source(subject)
     light_metrics = {}
     if lights.source != "gt":
         light_metrics = light_errors(lights, subject)
         subject = with_lights(subject, lights)
-    method_name, method = build(cfg.method)
+    if method_name == "unps":
+        method = partial(method, refine_lights=refine, output_dir=out)
     h, w = subject.resolution
     log.info("%s: %d images, %d×%d pixels (%d on the object), read in %.1f s; lights: %s; "
              "method: %s", subject.name, subject.n_images, w, h, subject.mask.sum(),
@@ -74,11 +86,19 @@ def fit(cfg: DictConfig) -> dict:
     estimate = method(subject, lights.directions)
     depth = integrate_normals(estimate.normals, subject.mask)
     runtime = time.perf_counter() - start
+    if refine:
+        rendering = estimate.rendering
+        intensities = (lights.intensities if lights.intensities is not None
+                       else np.ones_like(lights.directions)) * rendering.light_scales[:, None]
+        lights = Lights(rendering.light_directions, intensities.astype(np.float32), "refined")
+        light_metrics = light_errors(lights, original)
 
     metrics = {"subject": subject.name, "method": method_name, "light": light_name,
                "noise": cfg.noise, "noise_reference": noise_reference,
                "runtime_s": runtime, "n_images": subject.n_images, "resolution": [h, w],
                **light_metrics}
+    if estimate.rendering is not None:
+        metrics.update(estimate.rendering.info)
     error = None
     if subject.normals is not None:
         error = angular_error(estimate.normals, subject.normals)

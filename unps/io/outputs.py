@@ -42,6 +42,8 @@ def write_fit_outputs(out: Path, subject: Subject, estimate: Estimate, depth: np
     vertices, faces = depth_to_mesh(depth, mask, subject.frame)
     write_ply(out / "mesh.ply", vertices, faces, normals=estimate.normals[mask])
     write_lights(out / "lights.txt", lights)
+    if estimate.rendering is not None:
+        write_rendering(out, estimate.rendering)
     if error is not None:
         title = (f"{subject.name}: mean {metrics['normal_mae']:.2f}°, "
                  f"median {metrics['normal_median']:.2f}°")
@@ -51,6 +53,28 @@ def write_fit_outputs(out: Path, subject: Subject, estimate: Estimate, depth: np
     write_json(out / "metrics.json", {**metrics, "albedo_png_scale": albedo_scale,
                                       "frame": subject.frame.to_dict()})
     log.info("outputs written to %s", out)
+
+
+def write_rendering(out: Path, rendering) -> None:
+    """A rendering method's per-image maps, on its working grid (recorded in metrics.json):
+    ``reflectance.npy`` and ``reconstruction.npy`` (n, h, w, 3) float16, and two contact sheets
+    of up to 6 evenly spaced images: ``reconstruction.png`` (rows: observed, reconstructed,
+    |difference|, on one scale) and ``reflectance.png``.
+    """
+    write_npy(out / "reflectance.npy", rendering.reflectance.astype(np.float16))
+    write_npy(out / "reconstruction.npy", rendering.reconstruction.astype(np.float16))
+    n = len(rendering.observed)
+    picks = np.unique(np.linspace(0, n - 1, min(n, 6)).round().astype(int))
+    mask = rendering.mask[..., None]
+    observed, reconstructed = rendering.observed[picks] * mask, rendering.reconstruction[picks] * mask
+    level = max(float(np.percentile(observed[:, rendering.mask], 99)), 1e-12)
+    rows = [observed, reconstructed, np.abs(observed - reconstructed)]
+    sheet = np.concatenate([np.concatenate(list(r), 1) for r in rows], 0) / level
+    write_png8(out / "reconstruction.png", np.round(np.clip(sheet, 0, 1) * 255).astype(np.uint8))
+    reflectance = rendering.reflectance[picks] * mask
+    level = max(float(np.percentile(reflectance[:, rendering.mask], 99)), 1e-12)
+    sheet = np.concatenate(list(reflectance), 1) / level
+    write_png8(out / "reflectance.png", np.round(np.clip(sheet, 0, 1) * 255).astype(np.uint8))
 
 
 def _write_tensorboard(folder: Path, subject: Subject, estimate: Estimate,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -16,10 +17,13 @@ class Estimate:
     Attributes:
         normals: (H, W, 3) float32 unit normals in the unps frame (zero off the mask).
         albedo: (H, W, 3) float32 RGB albedo (zero off the mask).
+        rendering: what a rendering method explains besides (``method=unps``:
+            :class:`unps.inverse.fit.Rendering`), or None.
     """
 
     normals: np.ndarray
     albedo: np.ndarray
+    rendering: Any = None
 
 
 def lambertian_least_squares(intensity: np.ndarray, light_directions: np.ndarray) -> np.ndarray:

@@ -1,0 +1,233 @@
+"""The neural inverse rendering (method=unps): its pieces at tiny sizes, a short fit, resume."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+from hydra import compose, initialize_config_module
+
+from unps.data.analytic import render_lambertian
+from unps.errors import Diverged, InputError
+from unps.fit import fit
+from unps.inverse.fit import Preset, neural_inverse_rendering, upsample_normals, working_factor
+from unps.inverse.interreflection import Interreflection, physical_albedo
+from unps.inverse.networks import NormalNet, ReflectanceNet, shading, specular_map
+from unps.inverse.system import InverseRendering
+from unps.metrics import angular_error
+
+TINY = dict(name="tiny", width=16, depth=3, first_kernel=1, reflectance_width=8, steps=20,
+            lr_drop_at=18, images_per_step=8, update_every=10)
+NAYAR = dict(enabled=True, downsample=2, occlusion=True)
+
+
+def config(tmp_path, *overrides):
+    with initialize_config_module(config_module="unps.conf", version_base="1.3"):
+        return compose("fit", overrides=[f"paths.output_dir={tmp_path}", *overrides])
+
+
+def tiny_overrides(steps=20, every=10):
+    return ["subject=lambertian", "subject.size=24", "subject.n_lights=12", "method=unps",
+            "preset.width=16", "preset.depth=3", "preset.reflectance_width=8", f"preset.steps={steps}",
+            f"preset.lr_drop_at={steps - 2}", "preset.images_per_step=6", f"preset.update_every={every}",
+            "interreflection.downsample=2"]
+
+
+def test_specular_map_matches_a_hand_computed_value():
+    n = torch.tensor([0.0, 0.6, 0.8]).view(1, 3, 1, 1)
+    lights = torch.tensor([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8]])
+    # v·(2(n·l)n − l): l = z → 2·0.8·0.8 − 1 = 0.28; l = (0.6, 0, 0.8) → 2·0.64·0.8 − 0.8 = 0.224
+    np.testing.assert_allclose(specular_map(n, lights).flatten().numpy(), [0.28, 0.224], atol=1e-6)
+    # the mirror direction of a light along the normal is the light itself
+    assert specular_map(torch.tensor([0.0, 0, 1]).view(1, 3, 1, 1), torch.tensor([[0.0, 0, 1]])).item() == 1
+    with pytest.raises(ValueError, match=r"lights must be \(B, 3\)"):
+        specular_map(n, torch.ones(2, 2))
+
+
+def test_shading_is_clamped_lambertian():
+    n = torch.tensor([0.0, 0.0, 1.0]).view(1, 3, 1, 1)
+    lights = torch.tensor([[0.6, 0.0, 0.8], [0.0, 0.0, -1.0]])
+    np.testing.assert_allclose(shading(n, lights).flatten().numpy(), [0.8, 0.0])
+
+
+def test_networks_shapes_unit_normals_and_initialisation():
+    net = NormalNet(n_images=5, width=24, depth=4)
+    normals, features = net(torch.rand(1, 15, 9, 11), torch.ones(1, 1, 9, 11))
+    assert normals.shape == (1, 3, 9, 11) and features.shape == (1, 24, 9, 11)
+    torch.testing.assert_close(normals.norm(dim=1), torch.ones(1, 9, 11))
+    weights = torch.cat([m.weight.flatten() for m in net.modules() if isinstance(m, torch.nn.Conv2d)])
+    assert abs(weights.std().item() - 0.02) < 0.002 and abs(weights.mean().item()) < 0.002
+    refl = ReflectanceNet(feature_width=24, width=8)
+    out = refl(torch.rand(3, 3, 9, 11), torch.rand(3, 1, 9, 11), refl.global_term(features))
+    assert out.shape == (3, 3, 9, 11) and (out >= 0).all()
+
+
+def test_the_global_term_equals_concatenating_the_features_to_every_image():
+    refl = ReflectanceNet(feature_width=6, width=4)
+    features, images, spec = torch.rand(1, 6, 7, 7), torch.rand(2, 3, 7, 7), torch.rand(2, 1, 7, 7)
+    weight = torch.cat([refl.image_in.weight, refl.feature_in.weight], 1)
+    joint = torch.nn.functional.conv2d(
+        torch.nn.functional.pad(torch.cat([images, spec, features.expand(2, -1, -1, -1)], 1),
+                                (1, 1, 1, 1), mode="replicate"), weight, refl.image_in.bias)
+    split = refl.image_in(torch.cat([images, spec], 1)) + refl.global_term(features)
+    torch.testing.assert_close(joint, split)
+
+
+def test_paper_preset_has_the_papers_size():
+    preset = Preset()
+    nets = [NormalNet(96, preset.width, preset.depth, preset.first_kernel),
+            ReflectanceNet(preset.width, preset.reflectance_width, preset.reflectance_depth)]
+    count = sum(p.numel() for net in nets for p in net.parameters())
+    assert 3.5e6 < count < 3.9e6          # "≈ 3.7 million parameters"
+
+
+def groove_normals(size=8, slope=1.0):
+    """(size, size, 3) normals of a V-groove along y, concave toward the camera."""
+    c = np.arange(size) - (size - 1) / 2
+    n = np.stack([-slope * np.sign(c), 0 * c, np.ones_like(c)], -1)
+    n = n / np.linalg.norm(n, axis=-1, keepdims=True)
+    return np.repeat(n[None], size, 0)
+
+
+def test_interreflection_solve_is_differentiable_float64():
+    normals = groove_normals()
+    mask = np.ones(normals.shape[:2], bool)
+    solver = Interreflection(mask, np.full(mask.shape, 0.8), downsample=2)
+    solver.update(normals)
+    x = torch.tensor(normals, dtype=torch.float64).permute(2, 0, 1)[None].requires_grad_()
+    assert torch.autograd.gradcheck(solver, (x,), eps=1e-6, atol=1e-6)
+
+
+def test_interreflection_bends_groove_normals_toward_each_other_and_leaves_a_plane():
+    normals = groove_normals(12)
+    mask = np.ones(normals.shape[:2], bool)
+    solver = Interreflection(mask, np.full(mask.shape, 0.9), downsample=2)
+    solver.update(normals)
+    x = torch.tensor(normals, dtype=torch.float32).permute(2, 0, 1)[None]
+    pseudo = solver(x)[0].permute(1, 2, 0).numpy()
+    # each wall receives light from the other, so its pseudo normal turns toward the groove's axis
+    assert (np.abs(pseudo[:, :6, 0]) < np.abs(normals[:, :6, 0]) - 1e-3).all()
+    flat = np.zeros_like(normals)
+    flat[..., 2] = 1
+    solver.update(flat)
+    torch.testing.assert_close(solver(torch.tensor(flat).permute(2, 0, 1)[None]),
+                               torch.tensor(flat).permute(2, 0, 1)[None])
+
+
+def test_physical_albedo_scales_only_when_brighter_than_white():
+    mask = np.ones((4, 4), bool)
+    dim = np.full((4, 4), 0.4)
+    np.testing.assert_array_equal(physical_albedo(dim, mask), dim)
+    bright = np.linspace(1, 5, 16).reshape(4, 4)
+    scaled = physical_albedo(bright, mask)
+    assert np.percentile(scaled, 99) == pytest.approx(1.0) and scaled.min() > 0.19
+
+
+def test_working_factor_and_upsampled_normals():
+    assert working_factor(1000, None) == 1 and working_factor(1000, 1000) == 1
+    assert working_factor(1001, 1000) == 2 and working_factor(45200, 16000) == 2
+    normals = np.zeros((4, 4, 3), np.float32)
+    normals[..., 2] = 1
+    mask = np.zeros((4, 4), bool)
+    mask[1:3, 1:3] = True
+    up = upsample_normals(normals, mask, (7, 8), 2)
+    assert up.shape == (7, 8, 3)
+    np.testing.assert_allclose(up[..., 2], 1, atol=1e-6)
+
+
+def sphere_system(prior_weight):
+    subject = render_lambertian("sphere", size=24, n_lights=12, seed=1)
+    images = torch.as_tensor(subject.images / subject.images[:, subject.mask].mean()).permute(0, 3, 1, 2)
+    flat = np.zeros(subject.mask.shape + (3,), np.float32)
+    flat[..., 2] = 1
+    preset = Preset(**{**TINY, "prior_weight": prior_weight, "pixel_keep": 1.0})
+    return InverseRendering(
+        NormalNet(12, 16, 3, 1), ReflectanceNet(16, 8), images, subject.mask,
+        torch.as_tensor(subject.light_directions), torch.as_tensor(flat).permute(2, 0, 1), None,
+        preset.schedule(), true_normals=torch.as_tensor(subject.normals).permute(2, 0, 1)), subject
+
+
+def test_twenty_steps_on_a_tiny_sphere_lower_the_loss_and_the_error():
+    """No prior: the rendering loss alone must drive the normals toward the sphere's."""
+    import lightning as L
+
+    L.seed_everything(0, verbose=False)
+    system, subject = sphere_system(prior_weight=0.0)
+
+    def state():
+        with torch.no_grad():
+            out = system.render(torch.arange(12), noise=False)
+            loss = ((out["reconstruction"] - out["observed"]).abs() * system.mask).sum().item()
+            return loss, system.normal_mae(out["normals"]).item()
+
+    loss0, mae0 = state()
+    L.Trainer(max_steps=20, logger=False, enable_checkpointing=False, enable_progress_bar=False,
+              enable_model_summary=False).fit(system)
+    loss1, mae1 = state()
+    assert loss1 < 0.8 * loss0         # measured: 10172 → 6983
+    assert mae1 < 0.5 * mae0           # measured: 72° → 22°
+
+
+def test_fit_writes_the_unps_outputs(tmp_path):
+    metrics = fit(config(tmp_path, *tiny_overrides(), "light=gt"))
+    for name in ("reflectance.npy", "reconstruction.npy", "reflectance.png", "reconstruction.png",
+                 "normals.npy", "mesh.ply", "checkpoints/last.ckpt", "metrics.json"):
+        assert (tmp_path / name).exists(), name
+    saved = json.loads((tmp_path / "metrics.json").read_text())
+    assert saved["method"] == "unps" and saved["fit_steps"] == 20 and saved["facets"] > 0
+    assert np.load(tmp_path / "reflectance.npy").shape == (12, *saved["fit_resolution"], 3)
+    assert metrics["normal_mae"] < 30
+
+
+def test_a_killed_fit_resumes_from_its_last_checkpoint(tmp_path, monkeypatch):
+    step = InverseRendering.training_step
+
+    def dies_at_25(self, batch, batch_idx):
+        if self.global_step == 25:
+            raise RuntimeError("killed")   # as a crash; SIGKILL leaves the folder in the same state
+        return step(self, batch, batch_idx)
+
+    monkeypatch.setattr(InverseRendering, "training_step", dies_at_25)
+    cfg = config(tmp_path, *tiny_overrides(steps=40), "light=gt")
+    with pytest.raises(RuntimeError, match="killed"):
+        fit(cfg)
+    assert (tmp_path / "checkpoints" / "last.ckpt").is_file()
+    assert not (tmp_path / "metrics.json").exists()
+    monkeypatch.setattr(InverseRendering, "training_step", step)
+    metrics = fit(cfg)
+    assert metrics["resumed_from_step"] == 20 and metrics["normal_mae"] < 30
+    other = config(tmp_path, *tiny_overrides(steps=40), "light=gt", "preset.lr=1e-3")
+    with pytest.raises(InputError, match="belongs to another run"):
+        fit(other)
+
+
+def test_a_diverging_fit_stops_with_a_clear_message(tmp_path, monkeypatch):
+    render = InverseRendering.render
+
+    def poisoned(self, index, noise=True):
+        out = render(self, index, noise)
+        if self.global_step >= 12:
+            out["reconstruction"] = out["reconstruction"] * float("nan")
+        return out
+
+    monkeypatch.setattr(InverseRendering, "render", poisoned)
+    with pytest.raises(Diverged, match="became nan at step 12.*last.ckpt"):
+        fit(config(tmp_path, *tiny_overrides(), "light=gt"))
+    assert torch.load(tmp_path / "checkpoints" / "last.ckpt", weights_only=False)["global_step"] == 10
+    assert not (tmp_path / "metrics.json").exists()
+
+
+def test_refined_lights_are_reported_and_need_method_unps(tmp_path):
+    metrics = fit(config(tmp_path / "a", *tiny_overrides(), "light=refine"))
+    assert metrics["light"] == "refine" and "light_dir_mae" in metrics
+    with pytest.raises(InputError, match="light=refine .* needs method=unps"):
+        fit(config(tmp_path / "b", "subject=lambertian", "method=rpca", "light=refine"))
+
+
+def test_interreflection_off_and_in_memory_fits(sphere):
+    for enabled in (False, True):
+        estimate = neural_inverse_rendering(sphere, sphere.light_directions, TINY,
+                                            {**NAYAR, "enabled": enabled})
+        mae = angular_error(estimate.normals, sphere.normals)[sphere.mask].mean()
+        assert estimate.normals.shape == sphere.normals.shape and mae < 30
+        assert estimate.rendering.info["interreflection"] is enabled

@@ -1,0 +1,61 @@
+"""TensorBoard pictures of a fit in progress (rank zero only)."""
+
+from __future__ import annotations
+
+import lightning as L
+import numpy as np
+import torch
+from lightning.pytorch.utilities import rank_zero_only
+
+from unps.geometry import integrate_normals
+from unps.io.pictures import error_rgb, normal_rgb
+
+
+def depth_rgb(depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """(H, W) depth → (H, W, 3) uint8 gray, near = bright, stretched over the object's range."""
+    values = depth[mask]
+    low, high = float(values.min()), float(values.max())
+    t = np.zeros(mask.shape, np.float32)
+    t[mask] = (values - low) / max(high - low, 1e-12)
+    return np.repeat((np.round(t * 255) * mask)[..., None], 3, -1).astype(np.uint8)
+
+
+def side_by_side(observed: np.ndarray, reconstructed: np.ndarray) -> np.ndarray:
+    """Two (H, W, 3) images on one scale (the observed 99th percentile) → (H, 2W, 3) uint8."""
+    level = max(float(np.percentile(observed, 99)), 1e-12)
+    both = np.concatenate([observed, reconstructed], 1) / level
+    return (np.round(np.clip(both, 0, 1) * 255)).astype(np.uint8)
+
+
+class FitPictures(L.Callback):
+    """Every ``every`` steps: normals, error map (with ground truth), depth, and for one image
+    the observed | reconstructed pair and its reflectance map."""
+
+    def __init__(self, every: int = 100):
+        self.every = every
+
+    @rank_zero_only
+    def on_train_batch_end(self, trainer, module, outputs, batch, batch_idx) -> None:
+        step = trainer.global_step
+        if trainer.logger is None or (step % self.every and step != trainer.max_steps):
+            return
+        writer = trainer.logger.experiment
+        mask = module.mask_np
+        with torch.no_grad():
+            index = torch.tensor([(step // self.every) % module.images.shape[0]], device=module.device)
+            out = module.render(index, noise=False)
+        normals = out["normals"][0].permute(1, 2, 0).cpu().numpy()
+        writer.add_image("fit/normals", normal_rgb(normals, mask), step, dataformats="HWC")
+        writer.add_image("fit/depth", depth_rgb(integrate_normals(normals, mask), mask), step,
+                         dataformats="HWC")
+        if module.true_normals is not None:
+            truth = module.true_normals[0].permute(1, 2, 0).cpu().numpy()
+            error = np.degrees(np.arccos(np.clip((normals * truth).sum(-1), -1, 1)))
+            writer.add_image("fit/error_0_45deg", error_rgb(error, mask), step, dataformats="HWC")
+        observed = out["observed"][0].permute(1, 2, 0).cpu().numpy() * mask[..., None]
+        reconstructed = out["reconstruction"][0].permute(1, 2, 0).cpu().numpy() * mask[..., None]
+        writer.add_image("fit/observed_vs_reconstructed", side_by_side(observed, reconstructed), step,
+                         dataformats="HWC")
+        reflectance = out["reflectance"][0].permute(1, 2, 0).cpu().numpy() * mask[..., None]
+        level = max(float(np.percentile(reflectance[mask], 99)), 1e-12)
+        writer.add_image("fit/reflectance", np.clip(reflectance / level, 0, 1), step, dataformats="HWC")

@@ -1,0 +1,271 @@
+"""``method=unps``: the paper's per-subject neural inverse rendering, end to end.
+
+    python -m unps.fit method=unps                          # preset=fast, interreflection=nayar
+    python -m unps.fit method=unps preset=paper light=gt
+    python -m unps.fit method=unps interreflection=off light=refine
+
+The subject is cropped to its mask (and, when the preset caps the pixel count, block-averaged
+to a working grid); the robust initialisation gives N_init and the albedo P; the networks are
+fitted for ``steps`` Adam steps (:class:`unps.inverse.system.InverseRendering`); the normals
+come back on the subject's own grid. With an output folder, checkpoints land in
+``checkpoints/`` every ``update_every`` steps and a rerun in the same folder resumes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import logging
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+from scipy.ndimage import distance_transform_edt
+
+from unps.data.subject import Subject
+from unps.errors import Diverged, InputError
+from unps.inverse.interreflection import Interreflection, physical_albedo
+from unps.inverse.networks import NormalNet, ReflectanceNet
+from unps.inverse.system import InverseRendering, Schedule
+from unps.solvers.rpca import robust_init
+from unps.solvers.woodham import Estimate, rgb_albedo
+
+log = logging.getLogger(__name__)
+
+CROP_MARGIN = 4   # pixels of background kept around the object so convolutions see its edge
+
+
+@dataclass(frozen=True)
+class Preset:
+    """Network sizes, working resolution and schedule (``preset=fast|paper``).
+
+    Attributes:
+        name: label.
+        width, depth, first_kernel: the normal network (:class:`NormalNet`).
+        reflectance_width, reflectance_depth: f_sp (:class:`ReflectanceNet`).
+        max_pixels: object pixels on the working grid; larger subjects are block-averaged by the
+            smallest whole factor that fits, and the normals upsampled back. None = full resolution.
+        The remaining fields are :class:`Schedule`'s.
+    """
+
+    name: str = "paper"
+    width: int = 384
+    depth: int = 4
+    first_kernel: int = 3
+    reflectance_width: int = 16
+    reflectance_depth: int = 3
+    max_pixels: int | None = None
+    steps: int = 1000
+    lr: float = 8e-4
+    normal_lr: float | None = None
+    lr_drop_at: int = 900
+    input_noise_var: float = 0.1
+    images_per_step: int | None = None
+    pixel_keep: float = 0.1
+    prior_weight: float = 0.1
+    prior_steps: int = 50
+    update_every: int = 100
+
+    def schedule(self) -> Schedule:
+        fields = {f.name for f in dataclasses.fields(Schedule)}
+        return Schedule(**{k: v for k, v in dataclasses.asdict(self).items() if k in fields})
+
+
+@dataclass(frozen=True)
+class Rendering:
+    """What the inverse renderer explains, on its working grid (h, w).
+
+    Attributes:
+        mask: (h, w) bool.
+        observed, reconstruction, reflectance: (n, h, w, 3) float32, the images divided by their
+            intensities, the model's X̃_i, and f_sp's ρ_i.
+        light_directions: (n, 3) the directions used at the end (refined or as given).
+        light_scales: (n,) intensity corrections (all 1 unless refined).
+        info: counts and settings for metrics.json.
+    """
+
+    mask: np.ndarray
+    observed: np.ndarray
+    reconstruction: np.ndarray
+    reflectance: np.ndarray
+    light_directions: np.ndarray
+    light_scales: np.ndarray
+    info: dict
+
+
+def working_factor(object_pixels: int, max_pixels: int | None) -> int:
+    """The smallest whole factor f with object_pixels / f² ≤ max_pixels (1 when uncapped)."""
+    if max_pixels is None or object_pixels <= max_pixels:
+        return 1
+    return math.ceil(math.sqrt(object_pixels / max_pixels))
+
+
+def upsample_normals(normals: np.ndarray, mask: np.ndarray, shape: tuple[int, int],
+                     factor: int) -> np.ndarray:
+    """(h, w, 3) normals of a grid ``factor`` times coarser → (H, W, 3) unit normals.
+
+    Values off the coarse mask are first filled from the nearest object pixel, so the bilinear
+    interpolation near the silhouette mixes only object normals.
+    """
+    _, (rows, cols) = distance_transform_edt(~mask, return_indices=True)
+    filled = normals[rows, cols].astype(np.float32)
+    size = (mask.shape[1] * factor, mask.shape[0] * factor)
+    up = cv2.resize(filled, size, interpolation=cv2.INTER_LINEAR)[: shape[0], : shape[1]]
+    return up / np.maximum(np.linalg.norm(up, axis=-1, keepdims=True), 1e-12)
+
+
+def fingerprint(subject: Subject, light_directions: np.ndarray, settings: dict) -> str:
+    """SHA-256 of the working data and settings: a checkpoint resumes only the run it came from."""
+    digest = hashlib.sha256()
+    for array in (subject.images, subject.mask, light_directions):
+        digest.update(np.ascontiguousarray(array).tobytes())
+    digest.update(json.dumps(settings, sort_keys=True).encode())
+    return digest.hexdigest()
+
+
+def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, preset: dict,
+                             interreflection: dict, refine_lights: bool = False,
+                             output_dir: str | Path | None = None) -> Estimate:
+    """Fit the inverse-rendering networks to one subject.
+
+    Args:
+        subject: images divided by their intensities.
+        light_directions: (n, 3) unit, surface to light (estimated or calibrated).
+        preset: :class:`Preset` fields.
+        interreflection: ``enabled`` (bool), ``downsample`` (facet grid factor), ``occlusion``.
+        refine_lights: learn the lights jointly, starting from ``light_directions``.
+        output_dir: run folder for checkpoints (resumed from when present) and TensorBoard;
+            None keeps everything in memory.
+
+    Returns:
+        Normals and albedo on the subject's grid, with the :class:`Rendering` in ``rendering``.
+    """
+    import lightning as L
+    from lightning.pytorch.callbacks import ModelCheckpoint
+    from lightning.pytorch.loggers import TensorBoardLogger
+
+    from unps.inverse.callbacks import FitPictures
+
+    settings = {"preset": dict(preset), "interreflection": dict(interreflection),
+                "refine_lights": refine_lights}
+    preset = Preset(**{k: v for k, v in preset.items()})
+    schedule = preset.schedule()
+    cropped = subject.crop_to_mask(CROP_MARGIN)
+    factor = working_factor(int(cropped.mask.sum()), preset.max_pixels)
+    work = cropped.downsample(factor)
+    h, w = work.resolution
+    log.info("unps (%s preset): working grid %d×%d (%d object pixels, ×%d coarser than the subject), "
+             "%d images", preset.name, w, h, work.mask.sum(), factor, work.n_images)
+
+    init = robust_init(work, light_directions)
+    mask = work.mask
+    gray_albedo = init.albedo.mean(-1)
+    scale = float(np.percentile(work.images[:, mask], 99))    # the white level: images in [0, ~1]
+    if not scale > 0:
+        raise InputError(f"subject {subject.name!r}: the images are black on the object (99th "
+                         f"percentile {scale}); nothing to fit")
+    images = torch.as_tensor(work.images / scale).permute(0, 3, 1, 2).contiguous()
+
+    solver = None
+    if interreflection["enabled"]:
+        solver = Interreflection(mask, physical_albedo(gray_albedo, mask),
+                                 interreflection["downsample"], interreflection["occlusion"])
+        log.info("interreflections: %d facets (×%d)", solver.n_facets, solver.factor)
+
+    n = work.n_images
+    normal_net = NormalNet(n, preset.width, preset.depth, preset.first_kernel)
+    reflectance_net = ReflectanceNet(preset.width, preset.reflectance_width, preset.reflectance_depth)
+    true_normals = (None if work.normals is None
+                    else torch.as_tensor(work.normals).permute(2, 0, 1).contiguous())
+    run_id = fingerprint(work, light_directions, settings)
+    system = InverseRendering(
+        normal_net, reflectance_net, images, mask, torch.as_tensor(light_directions, dtype=torch.float32),
+        torch.as_tensor(init.normals).permute(2, 0, 1).contiguous(), solver, schedule,
+        refine_lights=refine_lights, true_normals=true_normals, fingerprint=run_id)
+    parameters = sum(p.numel() for p in system.parameters() if p.requires_grad)
+    log.info("networks: %.2f M parameters; %d steps", parameters / 1e6, schedule.steps)
+
+    ckpt_path, resumed_from = None, 0
+    trainer_options: dict = dict(logger=False, enable_checkpointing=False, callbacks=[])
+    if output_dir is not None:
+        out = Path(output_dir)
+        last = out / "checkpoints" / "last.ckpt"
+        if last.is_file():
+            saved = torch.load(last, map_location="cpu", weights_only=False)
+            if saved.get("unps_fingerprint") != run_id:
+                raise InputError(f"{last}: this checkpoint belongs to another run (different images, "
+                                 f"lights or settings); choose a new hydra.run.dir or delete it")
+            ckpt_path, resumed_from = str(last), int(saved["global_step"])
+            log.info("resuming from %s at step %d", last, resumed_from)
+        trainer_options = dict(
+            logger=TensorBoardLogger(str(out), name="tensorboard", version=""),
+            callbacks=[ModelCheckpoint(dirpath=out / "checkpoints", save_last=True, save_top_k=0,
+                                       every_n_train_steps=schedule.update_every),
+                       FitPictures(every=schedule.update_every)])
+    trainer = L.Trainer(max_steps=schedule.steps, accelerator="auto", devices=1,
+                        log_every_n_steps=10, enable_model_summary=False,
+                        num_sanity_val_steps=0, **trainer_options)
+    start = time.perf_counter()
+    try:
+        trainer.fit(system, ckpt_path=ckpt_path)
+    except Diverged as e:
+        kept = (f"; the last good state (step {schedule.update_every}·k) is kept in "
+                f"{Path(output_dir) / 'checkpoints' / 'last.ckpt'}" if output_dir is not None else "")
+        raise Diverged(f"unps diverged on {subject.name!r}: {e}{kept}; try a lower preset.lr") from None
+    if trainer.global_step < schedule.steps:
+        raise RuntimeError(f"the fit stopped at step {trainer.global_step} of {schedule.steps}; "
+                           f"rerun in the same folder to resume")
+    seconds = time.perf_counter() - start
+    steps_run = schedule.steps - resumed_from
+    log.info("fitted %d steps in %.1f s (%.3f s/step)", steps_run, seconds, seconds / max(steps_run, 1))
+
+    rendering = final_rendering(system, schedule.images_per_step or 16, scale)
+    normals = rendering.pop("normals")
+    if factor > 1:
+        normals = upsample_normals(normals, mask, cropped.resolution, factor)
+    full_normals = np.zeros(subject.resolution + (3,), np.float32)
+    top = cropped.frame.top - subject.frame.top
+    left = cropped.frame.left - subject.frame.left
+    ch, cw = cropped.resolution
+    full_normals[top: top + ch, left: left + cw] = normals
+    full_normals[~subject.mask] = 0
+    object_normals = full_normals[subject.mask]
+    directions, scales = rendering["light_directions"], rendering["light_scales"]
+    pixels = subject.images[:, subject.mask] / scales[:, None, None]
+    albedo = np.zeros_like(full_normals)
+    albedo[subject.mask] = rgb_albedo(pixels, object_normals, directions)
+    info = {"fit_resolution": [h, w], "fit_downsample": factor, "fit_steps": schedule.steps,
+            "fit_s_per_step": seconds / max(steps_run, 1), "resumed_from_step": resumed_from,
+            "parameters": parameters, "facets": solver.n_facets if solver else 0, "preset": preset.name,
+            "interreflection": bool(interreflection["enabled"])}
+    return Estimate(full_normals, albedo,
+                    rendering=Rendering(mask=mask, observed=work.images, info=info, **rendering))
+
+
+@torch.no_grad()
+def final_rendering(system: InverseRendering, chunk: int, scale: float) -> dict:
+    """Normals, reflectance maps and reconstructions of every image, without input noise.
+
+    Returns numpy arrays on the working grid; images are multiplied by ``scale`` (the factor
+    they were normalised by) to come back in the subject's units.
+    """
+    system.eval()
+    n = system.images.shape[0]
+    reflectance, reconstruction = [], []
+    for start in range(0, n, chunk):
+        out = system.render(torch.arange(start, min(start + chunk, n), device=system.device), noise=False)
+        reflectance.append(out["reflectance"].cpu())
+        reconstruction.append(out["reconstruction"].cpu())
+    normals = out["normals"][0].permute(1, 2, 0).cpu().numpy()
+    directions, scales = system.lights()
+
+    def hwc(parts):
+        return torch.cat(parts).permute(0, 2, 3, 1).numpy() * scale
+
+    return {"normals": normals, "reflectance": hwc(reflectance), "reconstruction": hwc(reconstruction),
+            "light_directions": directions.cpu().numpy(), "light_scales": scales.cpu().numpy()}

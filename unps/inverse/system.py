@@ -1,0 +1,192 @@
+"""The per-subject optimisation: a thin LightningModule around the inverse-rendering networks.
+
+Every step renders a batch of images through the physical model
+
+    X̃_i = s_i · ρ_i ⊙ max(N_ny · l_i, 0),
+
+ρ_i = f_sp(X_i + noise, R_i(N_o, l_i), features), N_o = ξ_n1(ξ_f(X)), N_ny = ξ_n2(N_o) (or N_o with
+interreflections off), and compares it with the observed X_i. The images are divided by their
+light intensities, so s_i = 1 unless the lights are refined (then s_i and l_i are learnt).
+
+Frame: x right, y up, z toward the camera; light directions point from the surface to the light.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import lightning as L
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from unps.errors import Diverged
+from unps.inverse.interreflection import Interreflection
+from unps.inverse.networks import NormalNet, ReflectanceNet, shading, specular_map
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """The optimisation's hyper-parameters (supplementary §2.2 unless noted).
+
+    Attributes:
+        steps: Adam steps (1000).
+        lr: learning rate (8e-4).
+        normal_lr: learning rate of the estimation branch ξ_f, ξ_n1; None = ``lr`` (the paper
+            used 8e-5 on its own dataset).
+        lr_drop_at: the step after which every learning rate is divided by 10 (900).
+        input_noise_var: variance of the Gaussian noise added to f_sp's image input (0.1), on
+            images scaled to [0, ~1] (their 99th percentile over the object is 1).
+        images_per_step: images rendered per step; None = all of them.
+        pixel_keep: fraction of object pixels in each step's loss (Taniai & Maehara: 0.1).
+        prior_weight: weight of the prior ‖N_o − N_init‖² toward the robust initialisation.
+        prior_steps: the prior holds for the first this many steps.
+        update_every: depth and the interreflection kernel are rebuilt from N_o this often (100).
+    """
+
+    steps: int = 1000
+    lr: float = 8e-4
+    normal_lr: float | None = None
+    lr_drop_at: int = 900
+    input_noise_var: float = 0.1
+    images_per_step: int | None = None
+    pixel_keep: float = 0.1
+    prior_weight: float = 0.1
+    prior_steps: int = 50
+    update_every: int = 100
+
+
+class InverseRendering(L.LightningModule):
+    """Loss, optimiser and logging of one subject's fit.
+
+    The loss is the L1 reconstruction error over a random ``pixel_keep`` share of the object's
+    pixels, plus, for the first ``prior_steps`` steps, ``prior_weight``·mean‖N_o − N_init‖²:
+    networks initialised at random produce arbitrary normals, and without this pull the
+    reflectance network can explain the images with any of them; Taniai & Maehara found a weight
+    of 0.1 for 50 of 1000 steps enough to start in the robust initialisation's basin, and short
+    enough not to keep its errors (shadows and highlights the reflectance maps then explain).
+
+    Args:
+        normal_net, reflectance_net: the networks.
+        images: (n, 3, H, W) images divided by their intensities and by their 99th percentile
+            over the object.
+        mask: (H, W) bool.
+        light_directions: (n, 3) unit.
+        init_normals: (3, H, W) robust-initialisation normals N_init.
+        interreflection: ξ_n2, or None to render with N_o.
+        schedule: the hyper-parameters.
+        refine_lights: learn per-image directions and intensity scales, starting from the given.
+        true_normals: (3, H, W) ground truth, for the progress bar's MAE only.
+        fingerprint: identifies the run; stored in checkpoints so a resume cannot mix runs.
+    """
+
+    def __init__(self, normal_net: NormalNet, reflectance_net: ReflectanceNet, images: torch.Tensor,
+                 mask: np.ndarray, light_directions: torch.Tensor, init_normals: torch.Tensor,
+                 interreflection: Interreflection | None, schedule: Schedule,
+                 refine_lights: bool = False, true_normals: torch.Tensor | None = None,
+                 fingerprint: str = ""):
+        super().__init__()
+        self.normal_net, self.reflectance_net = normal_net, reflectance_net
+        self.schedule, self.interreflection = schedule, interreflection
+        self.refine_lights, self.fingerprint = refine_lights, fingerprint
+        self.mask_np = mask
+        self.register_buffer("images", images, persistent=False)
+        self.register_buffer("mask", torch.as_tensor(mask, dtype=torch.float32)[None, None],
+                             persistent=False)
+        self.register_buffer("initial_lights", light_directions, persistent=False)
+        self.register_buffer("init_normals", init_normals[None], persistent=False)
+        self.register_buffer("true_normals", None if true_normals is None else true_normals[None],
+                             persistent=False)
+        n = images.shape[0]
+        self.light_offsets = torch.nn.Parameter(torch.zeros(n, 3), requires_grad=refine_lights)
+        self.light_log_scales = torch.nn.Parameter(torch.zeros(n), requires_grad=refine_lights)
+
+    # -- the model -----------------------------------------------------------------------------
+
+    def lights(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(n, 3) unit directions and (n,) intensity scales with geometric mean 1."""
+        directions = F.normalize(self.initial_lights + self.light_offsets, dim=1)
+        scales = torch.exp(self.light_log_scales - self.light_log_scales.mean())
+        return directions, scales
+
+    def normals(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """N_o (1, 3, H, W) and the global features."""
+        stacked = self.images.flatten(0, 1)[None]
+        return self.normal_net(stacked, self.mask)
+
+    def render(self, index: torch.Tensor, noise: bool = True) -> dict[str, torch.Tensor]:
+        """Reconstruct images ``index``: (B,) → dict of (B, C, H, W) maps and N_o, N_ny."""
+        normals, features = self.normals()
+        pseudo = self.interreflection(normals) if self.interreflection is not None else normals
+        directions, scales = self.lights()
+        lights = directions[index]
+        observed = self.images[index]
+        inputs = observed
+        if noise and self.schedule.input_noise_var > 0:
+            inputs = observed + math.sqrt(self.schedule.input_noise_var) * torch.randn_like(observed)
+        specular = specular_map(normals, lights)
+        reflectance = self.reflectance_net(inputs * self.mask, specular,
+                                           self.reflectance_net.global_term(features))
+        reconstruction = scales[index, None, None, None] * reflectance * shading(pseudo, lights)
+        return {"normals": normals, "pseudo_normals": pseudo, "reflectance": reflectance,
+                "reconstruction": reconstruction, "observed": observed, "specular": specular}
+
+    # -- Lightning -----------------------------------------------------------------------------
+
+    def on_train_batch_start(self, batch, batch_idx) -> None:
+        every = self.schedule.update_every
+        if self.interreflection is not None and self.global_step % every == 0:
+            if self.global_step == 0:
+                source = self.init_normals
+            else:
+                with torch.no_grad():
+                    source = self.normals()[0]
+            self.interreflection.update(source[0].permute(1, 2, 0).double().cpu().numpy())
+
+    def training_step(self, batch, batch_idx):
+        s = self.schedule
+        n = self.images.shape[0]
+        count = n if s.images_per_step is None else min(s.images_per_step, n)
+        index = torch.randperm(n, device=self.device)[:count]
+        out = self.render(index)
+        keep = self.mask * (torch.rand_like(self.mask) < s.pixel_keep)
+        if keep.sum() == 0:
+            keep = self.mask
+        residual = (out["reconstruction"] - out["observed"]).abs() * keep
+        loss = residual.sum() / (keep.sum() * 3 * count)
+        self.log("loss/reconstruction", loss, prog_bar=True)
+        if self.global_step < s.prior_steps and s.prior_weight > 0:
+            prior = (((out["normals"] - self.init_normals) ** 2).sum(1, keepdim=True) * self.mask
+                     ).sum() / self.mask.sum()
+            loss = loss + s.prior_weight * prior
+            self.log("loss/prior", prior)
+        if not torch.isfinite(loss):
+            raise Diverged(f"the loss became {loss.item()} at step {self.global_step}")
+        if self.true_normals is not None:
+            self.log("mae", self.normal_mae(out["normals"].detach()), prog_bar=True)
+        if self.refine_lights:
+            self.log("light/offset_deg", torch.rad2deg(torch.acos(
+                (self.lights()[0] * self.initial_lights).sum(1).clamp(-1, 1))).mean())
+        return loss
+
+    def normal_mae(self, normals: torch.Tensor) -> torch.Tensor:
+        """Mean angular error (degrees) of (1, 3, H, W) normals over the mask."""
+        cos = (normals * self.true_normals).sum(1, keepdim=True).clamp(-1, 1)
+        return (torch.rad2deg(torch.acos(cos)) * self.mask).sum() / self.mask.sum()
+
+    def configure_optimizers(self):
+        s = self.schedule
+        groups = [{"params": self.normal_net.parameters(), "lr": s.normal_lr or s.lr},
+                  {"params": self.reflectance_net.parameters(), "lr": s.lr}]
+        if self.refine_lights:
+            groups.append({"params": [self.light_offsets, self.light_log_scales], "lr": s.lr})
+        optimiser = torch.optim.Adam(groups)
+        drop = torch.optim.lr_scheduler.MultiStepLR(optimiser, milestones=[s.lr_drop_at], gamma=0.1)
+        return {"optimizer": optimiser, "lr_scheduler": {"scheduler": drop, "interval": "step"}}
+
+    def on_save_checkpoint(self, checkpoint: dict) -> None:
+        checkpoint["unps_fingerprint"] = self.fingerprint
+
+    def train_dataloader(self):
+        return torch.utils.data.DataLoader(range(self.schedule.steps), batch_size=None)
