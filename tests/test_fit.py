@@ -55,7 +55,7 @@ def test_uncalibrated_folder_with_light_gt_fails_before_writing(tmp_path):
     (folder / "light_directions.txt").unlink()
     out = tmp_path / "run"
     with pytest.raises(InputError, match="has no light directions, so light=gt cannot be used"):
-        fit(config(out, "subject=folder", f"subject.root={folder}"))
+        fit(config(out, "subject=folder", f"subject.root={folder}", "light=gt"))
     assert not out.exists()
 
 
