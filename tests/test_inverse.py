@@ -140,11 +140,11 @@ def sphere_system(prior_weight):
     images = torch.as_tensor(subject.images / subject.images[:, subject.mask].mean()).permute(0, 3, 1, 2)
     flat = np.zeros(subject.mask.shape + (3,), np.float32)
     flat[..., 2] = 1
-    preset = Preset(**{**TINY, "prior_weight": prior_weight, "pixel_keep": 1.0})
+    preset = Preset.from_config({**TINY, "prior_weight": prior_weight, "pixel_keep": 1.0})
     return InverseRendering(
         NormalNet(12, 16, 3, 1), ReflectanceNet(16, 8), images, subject.mask,
         torch.as_tensor(subject.light_directions), torch.as_tensor(flat).permute(2, 0, 1), None,
-        preset.schedule(), true_normals=torch.as_tensor(subject.normals).permute(2, 0, 1)), subject
+        preset.schedule, true_normals=torch.as_tensor(subject.normals).permute(2, 0, 1)), subject
 
 
 def test_twenty_steps_on_a_tiny_sphere_lower_the_loss_and_the_error():

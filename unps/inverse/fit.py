@@ -50,7 +50,7 @@ class Preset:
         reflectance_width, reflectance_depth: f_sp (:class:`ReflectanceNet`).
         max_pixels: object pixels on the working grid; larger subjects are block-averaged by the
             smallest whole factor that fits, and the normals upsampled back. None = full resolution.
-        The remaining fields are :class:`Schedule`'s.
+        schedule: the optimisation's :class:`Schedule`.
     """
 
     name: str = "paper"
@@ -60,20 +60,14 @@ class Preset:
     reflectance_width: int = 16
     reflectance_depth: int = 3
     max_pixels: int | None = None
-    steps: int = 1000
-    lr: float = 8e-4
-    normal_lr: float | None = None
-    lr_drop_at: int = 900
-    input_noise_var: float = 0.1
-    images_per_step: int | None = None
-    pixel_keep: float = 0.1
-    prior_weight: float = 0.1
-    prior_steps: int = 50
-    update_every: int = 100
+    schedule: Schedule = Schedule()
 
-    def schedule(self) -> Schedule:
-        fields = {f.name for f in dataclasses.fields(Schedule)}
-        return Schedule(**{k: v for k, v in dataclasses.asdict(self).items() if k in fields})
+    @classmethod
+    def from_config(cls, fields: dict) -> Preset:
+        """From the flat ``preset`` config node: :class:`Schedule`'s keys go to ``schedule``."""
+        timing = {f.name for f in dataclasses.fields(Schedule)}
+        return cls(**{k: v for k, v in fields.items() if k not in timing},
+                   schedule=Schedule(**{k: v for k, v in fields.items() if k in timing}))
 
 
 @dataclass(frozen=True)
@@ -153,8 +147,8 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
 
     settings = {"preset": dict(preset), "interreflection": dict(interreflection),
                 "refine_lights": refine_lights}
-    preset = Preset(**{k: v for k, v in preset.items()})
-    schedule = preset.schedule()
+    preset = Preset.from_config(preset)
+    schedule = preset.schedule
     cropped = subject.crop_to_mask(CROP_MARGIN)
     factor = working_factor(int(cropped.mask.sum()), preset.max_pixels)
     work = cropped.downsample(factor)
