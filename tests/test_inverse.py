@@ -196,6 +196,9 @@ def test_a_killed_fit_resumes_from_its_last_checkpoint(tmp_path, monkeypatch):
     monkeypatch.setattr(InverseRendering, "training_step", step)
     metrics = fit(cfg)
     assert metrics["resumed_from_step"] == 20 and metrics["normal_mae"] < 30
+    uninterrupted = tmp_path / "uninterrupted"
+    fit(config(uninterrupted, *tiny_overrides(steps=40), "light=gt"))
+    np.testing.assert_array_equal(np.load(tmp_path / "normals.npy"), np.load(uninterrupted / "normals.npy"))
     other = config(tmp_path, *tiny_overrides(steps=40), "light=gt", "preset.lr=1e-3")
     with pytest.raises(InputError, match="belongs to another run"):
         fit(other)

@@ -27,7 +27,7 @@ from omegaconf import DictConfig, OmegaConf
 from unps.data.subject import Subject, add_noise
 from unps.errors import InputError, exit_on_bad_input
 from unps.geometry import integrate_normals
-from unps.lights import Lights
+from unps.lights import Lights, ground_truth
 from unps.metrics import angular_error, light_direction_mae, light_intensity_error, normal_metrics
 
 log = logging.getLogger("unps.fit")
@@ -93,7 +93,8 @@ def fit(cfg: DictConfig) -> dict:
         lights = Lights(rendering.light_directions, intensities.astype(np.float32), "refined")
         light_metrics = light_errors(lights, original)
 
-    metrics = {"subject": subject.name, "method": method_name, "light": light_name,
+    metrics = {"study": cfg.get("study"), "seed": cfg.seed,
+               "subject": subject.name, "method": method_name, "light": light_name,
                "noise": cfg.noise, "noise_reference": noise_reference,
                "runtime_s": runtime, "n_images": subject.n_images, "resolution": [h, w],
                **light_metrics}
@@ -106,7 +107,8 @@ def fit(cfg: DictConfig) -> dict:
         log.info("normal error: mean %.2f°, median %.2f°, %.1f%% under 11.25° (%.2f s)",
                  metrics["normal_mae"], metrics["normal_median"], 100 * metrics["acc_11_25"],
                  runtime)
-    write_fit_outputs(out, subject, estimate, depth, lights, metrics, error)
+    true_lights = ground_truth(original) if lights.source != "gt" and original.calibrated else None
+    write_fit_outputs(out, subject, estimate, depth, lights, metrics, error, true_lights)
     return metrics
 
 

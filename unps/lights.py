@@ -40,7 +40,7 @@ def write_lights(path, lights: Lights) -> None:
     intensities = lights.intensities
     if intensities is None:
         intensities = np.ones_like(lights.directions)
-    header = (f"lights used ({lights.source}); one row per image: lx ly lz (unit, surface to "
+    header = (f"lights ({lights.source}); one row per image: lx ly lz (unit, surface to "
               f"light; x right, y up, z toward the camera) e_r e_g e_b (RGB intensity)")
     with atomic_path(path) as tmp:
         np.savetxt(tmp, np.hstack([lights.directions, intensities]), fmt="%.6f", header=header)

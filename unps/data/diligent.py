@@ -65,6 +65,39 @@ def read_diligent(root: str | os.PathLike, drop: Sequence[int | str] = (),
     return prepare(subject, drop=drop, crop_margin=crop_margin, downsample=downsample)
 
 
+OBJECTS = ("ball", "bear", "buddha", "cat", "cow", "goblet", "harvest", "pot1", "pot2", "reading")
+LAYOUTS = ("pmsData", "pmsData_crop")   # the original release, then PS-FCN's 8-bit crops
+
+
+def find_diligent_object(data_dir: str | os.PathLike, name: str) -> Path:
+    """The folder of one DiLiGenT object: ``<data_dir>/pmsData/<name>PNG`` if present, else the
+    crop ``<data_dir>/pmsData_crop/<name>PNG``.
+
+    Raises:
+        InputError: ``data_dir`` or the object's folder is missing.
+    """
+    data_dir = Path(data_dir).expanduser()
+    if not data_dir.is_dir():
+        raise InputError(f"{data_dir}: DiLiGenT not found (expected the folder holding pmsData/); "
+                         f"set UNPS_DILIGENT_DIR or paths.diligent_dir")
+    for layout in LAYOUTS:
+        folder = data_dir / layout / f"{name}PNG"
+        if folder.is_dir():
+            return folder
+    raise InputError(f"{data_dir}: no DiLiGenT object {name!r} (looked for "
+                     f"{' and '.join(f'{layout}/{name}PNG' for layout in LAYOUTS)})")
+
+
+def read_diligent_object(data_dir: str | os.PathLike, object: str, **options) -> Subject:
+    """Read one DiLiGenT object by name (``subject=ball``, ``subject=cat``…); ``options`` are
+    :func:`read_diligent`'s. Where only the crop is present it is read, and the log says so."""
+    root = find_diligent_object(data_dir, object)
+    if root.parent.name != LAYOUTS[0]:
+        log.info("%s: reading the crop %s (the original release is not in %s)",
+                 object, root, Path(data_dir).expanduser())
+    return read_diligent(root, name=object, **options)
+
+
 def read_folder(root: str | os.PathLike, mask: str = MASK, encoding: str = "auto",
                 drop: Sequence[int | str] = (), crop_margin: int | None = None,
                 downsample: int = 1, name: str | None = None) -> Subject:

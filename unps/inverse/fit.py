@@ -139,12 +139,6 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
     Returns:
         Normals and albedo on the subject's grid, with the :class:`Rendering` in ``rendering``.
     """
-    import lightning as L
-    from lightning.pytorch.callbacks import ModelCheckpoint
-    from lightning.pytorch.loggers import TensorBoardLogger
-
-    from unps.inverse.callbacks import FitPictures
-
     settings = {"preset": dict(preset), "interreflection": dict(interreflection),
                 "refine_lights": refine_lights}
     preset = Preset.from_config(preset)
@@ -176,45 +170,15 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
     reflectance_net = ReflectanceNet(preset.width, preset.reflectance_width, preset.reflectance_depth)
     true_normals = (None if work.normals is None
                     else torch.as_tensor(work.normals).permute(2, 0, 1).contiguous())
-    run_id = fingerprint(work, light_directions, settings)
     system = InverseRendering(
         normal_net, reflectance_net, images, mask, torch.as_tensor(light_directions, dtype=torch.float32),
         torch.as_tensor(init.normals).permute(2, 0, 1).contiguous(), solver, schedule,
-        refine_lights=refine_lights, true_normals=true_normals, fingerprint=run_id)
+        refine_lights=refine_lights, true_normals=true_normals,
+        fingerprint=fingerprint(work, light_directions, settings))
     parameters = sum(p.numel() for p in system.parameters() if p.requires_grad)
     log.info("networks: %.2f M parameters; %d steps", parameters / 1e6, schedule.steps)
 
-    ckpt_path, resumed_from = None, 0
-    trainer_options: dict = dict(logger=False, enable_checkpointing=False, callbacks=[])
-    if output_dir is not None:
-        out = Path(output_dir)
-        last = out / "checkpoints" / "last.ckpt"
-        if last.is_file():
-            saved = torch.load(last, map_location="cpu", weights_only=False)
-            if saved.get("unps_fingerprint") != run_id:
-                raise InputError(f"{last}: this checkpoint belongs to another run (different images, "
-                                 f"lights or settings); choose a new hydra.run.dir or delete it")
-            ckpt_path, resumed_from = str(last), int(saved["global_step"])
-            log.info("resuming from %s at step %d", last, resumed_from)
-        trainer_options = dict(
-            logger=TensorBoardLogger(str(out), name="tensorboard", version=""),
-            callbacks=[ModelCheckpoint(dirpath=out / "checkpoints", save_last=True, save_top_k=0,
-                                       every_n_train_steps=schedule.update_every),
-                       FitPictures(every=schedule.update_every)])
-    trainer = L.Trainer(max_steps=schedule.steps, accelerator="auto", devices=1,
-                        log_every_n_steps=10, enable_model_summary=False,
-                        num_sanity_val_steps=0, **trainer_options)
-    start = time.perf_counter()
-    try:
-        trainer.fit(system, ckpt_path=ckpt_path)
-    except Diverged as e:
-        kept = (f"; the last good state (step {schedule.update_every}·k) is kept in "
-                f"{Path(output_dir) / 'checkpoints' / 'last.ckpt'}" if output_dir is not None else "")
-        raise Diverged(f"unps diverged on {subject.name!r}: {e}{kept}; try a lower preset.lr") from None
-    if trainer.global_step < schedule.steps:
-        raise RuntimeError(f"the fit stopped at step {trainer.global_step} of {schedule.steps}; "
-                           f"rerun in the same folder to resume")
-    seconds = time.perf_counter() - start
+    seconds, resumed_from = train(system, schedule, output_dir, subject.name)
     steps_run = schedule.steps - resumed_from
     log.info("fitted %d steps in %.1f s (%.3f s/step)", steps_run, seconds, seconds / max(steps_run, 1))
 
@@ -222,12 +186,7 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
     normals = rendering.pop("normals")
     if factor > 1:
         normals = upsample_normals(normals, mask, cropped.resolution, factor)
-    full_normals = np.zeros(subject.resolution + (3,), np.float32)
-    top = cropped.frame.top - subject.frame.top
-    left = cropped.frame.left - subject.frame.left
-    ch, cw = cropped.resolution
-    full_normals[top: top + ch, left: left + cw] = normals
-    full_normals[~subject.mask] = 0
+    full_normals = uncrop(normals, cropped, subject)
     object_normals = full_normals[subject.mask]
     directions, scales = rendering["light_directions"], rendering["light_scales"]
     pixels = subject.images[:, subject.mask] / scales[:, None, None]
@@ -236,9 +195,69 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
     info = {"fit_resolution": [h, w], "fit_downsample": factor, "fit_steps": schedule.steps,
             "fit_s_per_step": seconds / max(steps_run, 1), "resumed_from_step": resumed_from,
             "parameters": parameters, "facets": solver.n_facets if solver else 0, "preset": preset.name,
-            "interreflection": bool(interreflection["enabled"])}
+            "interreflection": bool(interreflection["enabled"]),
+            "facet_downsample": solver.factor if solver else None}
     return Estimate(full_normals, albedo,
                     rendering=Rendering(mask=mask, observed=work.images, info=info, **rendering))
+
+
+def train(system: InverseRendering, schedule: Schedule, output_dir: str | Path | None,
+          name: str) -> tuple[float, int]:
+    """Run the schedule with Lightning, resuming from ``<output_dir>/checkpoints/last.ckpt`` when
+    it holds this run (same fingerprint); returns the seconds spent and the step resumed from.
+
+    Raises:
+        InputError: the checkpoint belongs to another run.
+        Diverged: the loss stopped being finite; the message names the last good checkpoint.
+    """
+    import lightning as L
+    from lightning.pytorch.callbacks import ModelCheckpoint
+    from lightning.pytorch.loggers import TensorBoardLogger
+
+    from unps.inverse.callbacks import FitPictures
+
+    ckpt_path, resumed_from = None, 0
+    options: dict = dict(logger=False, enable_checkpointing=False, callbacks=[])
+    if output_dir is not None:
+        out = Path(output_dir)
+        last = out / "checkpoints" / "last.ckpt"
+        if last.is_file():
+            saved = torch.load(last, map_location="cpu", weights_only=False)
+            if saved.get("unps_fingerprint") != system.fingerprint:
+                raise InputError(f"{last}: this checkpoint belongs to another run (different images, "
+                                 f"lights or settings); choose a new hydra.run.dir or delete it")
+            ckpt_path, resumed_from = str(last), int(saved["global_step"])
+            log.info("resuming from %s at step %d", last, resumed_from)
+        options = dict(
+            logger=TensorBoardLogger(str(out), name="tensorboard", version=""),
+            callbacks=[ModelCheckpoint(dirpath=out / "checkpoints", save_last=True, save_top_k=0,
+                                       every_n_train_steps=schedule.update_every),
+                       FitPictures(every=schedule.update_every)])
+    trainer = L.Trainer(max_steps=schedule.steps, accelerator="auto", devices=1, log_every_n_steps=10,
+                        enable_model_summary=False, num_sanity_val_steps=0, **options)
+    start = time.perf_counter()
+    try:
+        trainer.fit(system, ckpt_path=ckpt_path)
+    except Diverged as e:
+        kept = (f"; the last good state (step {schedule.update_every}·k) is kept in "
+                f"{Path(output_dir) / 'checkpoints' / 'last.ckpt'}" if output_dir is not None else "")
+        raise Diverged(f"unps diverged on {name!r}: {e}{kept}; try a lower preset.lr") from None
+    if trainer.global_step < schedule.steps:
+        raise RuntimeError(f"the fit stopped at step {trainer.global_step} of {schedule.steps}; "
+                           f"rerun in the same folder to resume")
+    return time.perf_counter() - start, resumed_from
+
+
+def uncrop(normals: np.ndarray, cropped: Subject, subject: Subject) -> np.ndarray:
+    """(h, w, 3) normals on ``cropped``'s grid (a crop of ``subject``) → (H, W, 3) on the
+    subject's, zero off its mask."""
+    full = np.zeros(subject.resolution + (3,), np.float32)
+    top = cropped.frame.top - subject.frame.top
+    left = cropped.frame.left - subject.frame.left
+    h, w = cropped.resolution
+    full[top: top + h, left: left + w] = normals
+    full[~subject.mask] = 0
+    return full
 
 
 @torch.no_grad()

@@ -90,6 +90,7 @@ class InverseRendering(L.LightningModule):
         self.normal_net, self.reflectance_net = normal_net, reflectance_net
         self.schedule, self.interreflection = schedule, interreflection
         self.refine_lights, self.fingerprint = refine_lights, fingerprint
+        self._resumed_rng: dict | None = None   # a checkpoint's RNG state, until the next step
         self.mask_np = mask
         self.register_buffer("images", images, persistent=False)
         self.register_buffer("mask", torch.as_tensor(mask, dtype=torch.float32)[None, None],
@@ -135,6 +136,9 @@ class InverseRendering(L.LightningModule):
     # -- Lightning -----------------------------------------------------------------------------
 
     def on_train_batch_start(self, batch, batch_idx) -> None:
+        if self._resumed_rng is not None:   # here, as the data loader draws from it on resume
+            restore_rng(self._resumed_rng, self.device)
+            self._resumed_rng = None
         every = self.schedule.update_every
         if self.interreflection is not None and self.global_step % every == 0:
             if self.global_step == 0:
@@ -187,6 +191,23 @@ class InverseRendering(L.LightningModule):
 
     def on_save_checkpoint(self, checkpoint: dict) -> None:
         checkpoint["unps_fingerprint"] = self.fingerprint
+        checkpoint["unps_rng"] = rng_state(self.device)
+
+    def on_load_checkpoint(self, checkpoint: dict) -> None:
+        self._resumed_rng = checkpoint.get("unps_rng")
 
     def train_dataloader(self):
         return torch.utils.data.DataLoader(range(self.schedule.steps), batch_size=None)
+
+
+def rng_state(device: torch.device) -> dict:
+    """The generators behind the input noise and the image and pixel draws: a resumed fit
+    continues exactly as the uninterrupted one would have."""
+    return {"cpu": torch.get_rng_state(),
+            "cuda": torch.cuda.get_rng_state(device) if device.type == "cuda" else None}
+
+
+def restore_rng(state: dict, device: torch.device) -> None:
+    torch.set_rng_state(state["cpu"])
+    if state["cuda"] is not None and device.type == "cuda":
+        torch.cuda.set_rng_state(state["cuda"], device)

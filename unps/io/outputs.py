@@ -20,8 +20,13 @@ log = logging.getLogger(__name__)
 
 
 def write_fit_outputs(out: Path, subject: Subject, estimate: Estimate, depth: np.ndarray,
-                      lights: Lights, metrics: dict, error: np.ndarray | None) -> None:
+                      lights: Lights, metrics: dict, error: np.ndarray | None,
+                      true_lights: Lights | None = None) -> None:
     """Write normals, albedo, depth, mesh, error map, lights, TensorBoard and metrics.json.
+
+    With ground truth, ``normals_gt.png`` and ``error.npy`` (float16 degrees) are written too,
+    and ``lights_gt.txt`` when the lights used were not the true ones: the report's
+    qualitative grids and light plots read them.
 
     Every file is written atomically and ``metrics.json`` comes last, so its presence means
     the run finished.
@@ -31,6 +36,7 @@ def write_fit_outputs(out: Path, subject: Subject, estimate: Estimate, depth: np
         estimate: (H, W, 3) normals and albedo on the subject's grid.
         depth: (H, W) depth in pixel units, NaN off the mask.
         error: (H, W) angular error in degrees, when ground truth exists.
+        true_lights: the subject's calibrated lights, when known and not the ones used.
     """
     mask = subject.mask
     write_npy(out / "normals.npy", estimate.normals)
@@ -42,9 +48,14 @@ def write_fit_outputs(out: Path, subject: Subject, estimate: Estimate, depth: np
     vertices, faces = depth_to_mesh(depth, mask, subject.frame)
     write_ply(out / "mesh.ply", vertices, faces, normals=estimate.normals[mask])
     write_lights(out / "lights.txt", lights)
+    if true_lights is not None:
+        write_lights(out / "lights_gt.txt", true_lights)
+    if subject.normals is not None:
+        write_png8(out / "normals_gt.png", normal_rgb(subject.normals, mask))
     if estimate.rendering is not None:
         write_rendering(out, estimate.rendering)
     if error is not None:
+        write_npy(out / "error.npy", np.where(mask, error, np.nan).astype(np.float16))
         title = (f"{subject.name}: mean {metrics['normal_mae']:.2f}°, "
                  f"median {metrics['normal_median']:.2f}°")
         with atomic_path(out / "error.png") as tmp:

@@ -1,0 +1,244 @@
+import json
+from pathlib import Path
+
+import nbformat
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_module
+from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+from hydra.core.override_parser.overrides_parser import OverridesParser
+
+from unps.data.analytic import render_lambertian
+from unps.data.diligent import find_diligent_object, write_diligent
+from unps.errors import InputError
+from unps.fit import fit
+from unps.io.images import write_png8
+from unps.plan import expand, plan, print_plan
+from unps.report import report
+
+EXPERIMENTS = sorted(p.stem for p in (Path(__file__).parents[1] / "unps" / "conf" / "experiment").glob("*.yaml"))
+NOTEBOOK = Path(__file__).parents[1] / "notebooks" / "01_quickstart.ipynb"
+
+
+def hydra_config(*overrides):
+    with initialize_config_module(config_module="unps.conf", version_base="1.3"):
+        return compose("fit", overrides=list(overrides), return_hydra_config=True)
+
+
+def test_every_study_has_an_experiment():
+    assert EXPERIMENTS == ["baselines", "facets", "light_stats", "noise", "rose", "table1"]
+
+
+@pytest.mark.parametrize("name", EXPERIMENTS)
+def test_experiment_composes_every_job(name):
+    cfg = hydra_config(f"experiment={name}")
+    assert cfg.study == name and cfg.hydra.sweep.dir == f"multirun/{name}"
+    _, jobs = plan([f"experiment={name}"])   # composes each job's config
+    sizes = [len(str(v).split(",")) for v in cfg.hydra.sweeper.params.values()]
+    assert len(jobs) == int(np.prod(sizes)) > 0
+    assert len({folder for _, folder in jobs}) == len(jobs)   # no two jobs share a run folder
+
+
+def test_study_settings():
+    facets = hydra_config("experiment=facets", "interreflection=nayar_x8")
+    assert facets.light.name == "gt" and facets.interreflection.downsample == 8
+    assert hydra_config("experiment=light_stats").method.name == "woodham"
+    table1 = hydra_config("experiment=table1")
+    assert set(table1.hydra.sweeper.params.light.split(",")) == {"gt", "estimated", "refine"}
+
+
+@pytest.mark.parametrize("launcher, target", [("slurm", "SlurmLauncher"), ("local", "JoblibLauncher")])
+def test_launchers_compose(launcher, target):
+    cfg = hydra_config("experiment=noise", f"hydra/launcher={launcher}")
+    assert cfg.hydra.launcher._target_.endswith(target)
+    if launcher == "slurm":
+        assert cfg.hydra.launcher.submitit_folder.startswith("multirun/noise")
+
+
+def test_dry_run_prints_every_job(capsys):
+    print_plan(["experiment=noise", "hydra/launcher=slurm", "hydra.launcher.partition=gpu"])
+    out = capsys.readouterr().out
+    assert out.startswith("dry run: 24 jobs, launcher SlurmLauncher (partition=gpu")
+    assert "#23 subject=BrokenPot noise=0.2 experiment=noise" in out
+    assert "→  multirun/noise/noise=0.2,subject=BrokenPot" in out
+
+
+def test_dry_run_refuses_a_job_that_does_not_compose():
+    with pytest.raises(InputError, match="job subject=Nowhere does not compose"):
+        plan(["subject=Face,Nowhere"])
+
+
+@pytest.mark.parametrize("params, overrides", [
+    ({"subject": "Vase,Face", "noise": "0,0.1"}, []),
+    ({"subject": "Vase,Face"}, ["subject=Tablet1", "seed=1,2", "method=woodham"]),
+])
+def test_expand_matches_hydras_basic_sweeper(params, overrides):
+    parsed = OverridesParser.create().parse_overrides([f"{k}={v}" for k, v in params.items()] + overrides)
+    [hydras] = BasicSweeper.split_arguments(parsed, None)
+    assert expand(params, overrides) == hydras
+
+
+def test_diligent_objects_by_name(tmp_path):
+    write_diligent(render_lambertian(size=16, n_lights=4), tmp_path / "pmsData_crop" / "catPNG")
+    assert find_diligent_object(tmp_path, "cat") == tmp_path / "pmsData_crop" / "catPNG"
+    write_diligent(render_lambertian(size=16, n_lights=4), tmp_path / "pmsData" / "catPNG")
+    assert find_diligent_object(tmp_path, "cat") == tmp_path / "pmsData" / "catPNG"   # the original first
+    with pytest.raises(InputError, match="no DiLiGenT object 'pot1'"):
+        find_diligent_object(tmp_path, "pot1")
+    with pytest.raises(InputError, match="DiLiGenT not found.*UNPS_DILIGENT_DIR"):
+        find_diligent_object(tmp_path / "nowhere", "cat")
+
+
+def test_subject_by_name_runs_end_to_end(tmp_path):
+    data = tmp_path / "DiLiGenT"
+    write_diligent(render_lambertian(size=24, n_lights=12, seed=2), data / "pmsData" / "ballPNG")
+    with initialize_config_module(config_module="unps.conf", version_base="1.3"):
+        cfg = compose("fit", overrides=["subject=ball", f"paths.diligent_dir={data}", "method=woodham",
+                                        "light=estimated", f"paths.output_dir={tmp_path / 'run'}"])
+    metrics = fit(cfg)
+    assert metrics["subject"] == "ball" and metrics["study"] is None
+    run = tmp_path / "run"
+    assert {"normals_gt.png", "error.npy", "lights_gt.txt"} <= {p.name for p in run.iterdir()}
+    assert np.loadtxt(run / "lights_gt.txt").shape == (12, 6)
+    error = np.load(run / "error.npy")
+    assert np.nanmean(error.astype(np.float64)) == pytest.approx(metrics["normal_mae"], abs=0.05)
+
+
+# --------------------------------------------------------------------------- the aggregator
+
+
+def fake_run(sweep: Path, name: str, files: bool = False, **metrics) -> Path:
+    """A run folder as unps.fit leaves it, with made-up metrics (and pictures if ``files``)."""
+    folder = sweep / name
+    (folder / ".hydra").mkdir(parents=True)
+    defaults = {"study": None, "seed": 0, "method": "unps", "light": "estimated", "noise": 0.0,
+                "preset": "fast", "n_images": 100, "resolution": [8, 8], "runtime_s": 10.0,
+                "normal_median": 1.0, "acc_30": 0.9, "light_dir_mae": 5.0, "light_int_err": 0.1,
+                "interreflection": True, "facet_downsample": 4, "facets": 100}
+    (folder / "metrics.json").write_text(json.dumps({**defaults, **metrics}))
+    if files:
+        mask = np.ones((8, 8), bool)
+        write_png8(folder / "normals.png", np.full((8, 8, 3), 128, np.uint8))
+        write_png8(folder / "normals_gt.png", np.full((8, 8, 3), 100, np.uint8))
+        np.save(folder / "error.npy", np.where(mask, 3.0, np.nan).astype(np.float16))
+        write_png8(folder / "reflectance.png", np.full((8, 48, 3), 90, np.uint8))
+    return folder
+
+
+def test_table1_report(tmp_path):
+    sweep = tmp_path / "table1"
+    for subject, gt, est, refine in (("Vase", 10.0, 12.0, 11.0), ("cat", 6.0, 9.5, 7.0)):
+        for light, value in (("gt", gt), ("estimated", est), ("refine", refine)):
+            fake_run(sweep, f"light={light},subject={subject}", study="table1", subject=subject,
+                     light=light, normal_mae=value)
+    (sweep / "light=gt,subject=Face" / ".hydra").mkdir(parents=True)   # started, never finished
+    text = report(sweep).read_text()
+    assert "| Vase | 10.00 | 12.00 | +2.00 | 11.00 | 16.40 | 19.91 | +3.51 |" in text
+    assert "| cat | 6.00 | 9.50 | +3.50 | 7.00 | — | 7.91 | — |" in text
+    assert "| **average, all** | 8.00 | 10.75 | +2.75 | 9.00 |" in text
+    assert "average, the paper's six" not in text   # only two of them ran
+    assert "**1 unfinished runs** (no metrics.json): `light=gt,subject=Face`" in text
+    assert (sweep / "report" / "table1.png").stat().st_size > 0
+
+
+def test_noise_report_and_it_is_reproducible(tmp_path):
+    sweep = tmp_path / "noise"
+    for subject, base in (("Vase", 10.0), ("Face", 4.0)):
+        for sigma in (0.0, 0.1):
+            fake_run(sweep, f"noise={sigma},subject={subject}", study="noise", subject=subject,
+                     noise=sigma, normal_mae=base + 20 * sigma)
+    first = report(sweep, tmp_path / "a")
+    assert "| subject | σ = 0 | σ = 0.1 |" in first.read_text()
+    assert "| Vase | 10.00 | 12.00 |" in first.read_text()
+    assert "| **average** | 7.00 | 9.00 |" in first.read_text()
+    second = report(sweep, tmp_path / "b")
+    for name in ("results.md", "noise.png"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
+    assert second.read_text() == first.read_text()
+
+
+def test_facets_report(tmp_path):
+    sweep = tmp_path / "facets"
+    for setting, factor, facets, value in (("nayar_x2", 2, 400, 9.0), ("nayar", 4, 100, 8.0),
+                                           ("off", 4, 0, 10.0)):
+        fake_run(sweep, f"interreflection={setting},subject=Vase", study="facets", subject="Vase",
+                 light="gt", interreflection=setting != "off", facet_downsample=factor, facets=facets,
+                 normal_mae=value, runtime_s=100.0 * facets / 100 + 50)
+    text = report(sweep).read_text()
+    assert "| subject | ×2 | ×4 | off |" in text
+    assert "| Vase | 9.00 | 8.00 | 10.00 |" in text
+    assert "| Vase | 450 | 150 | 50 |" in text        # run time
+    assert "| Vase | 400 | 100 | 1280 |" in text       # facets, and the paper's count
+
+
+def test_light_stats_report_plots_the_components(tmp_path):
+    sweep = tmp_path / "light_stats"
+    folder = fake_run(sweep, "subject=Sphere", study="light_stats", subject="Sphere", method="woodham",
+                      normal_mae=5.0, light_dir_mae=4.25, light_int_err=0.05)
+    true = np.c_[np.eye(3), np.ones((3, 3))]
+    np.savetxt(folder / "lights_gt.txt", true)
+    np.savetxt(folder / "lights.txt", true)
+    text = report(sweep).read_text()
+    assert "| Sphere | 100 | 4.25 | 0.050 |" in text and "| Sphere (paper) | — | 6.31 | — |" in text
+    assert (sweep / "report" / "lights_Sphere.png").is_file()
+
+
+def test_baselines_and_rose_reports_draw_their_pictures(tmp_path):
+    sweep = tmp_path / "baselines"
+    for method, value in (("woodham", 20.0), ("rpca", 18.0), ("nayar", 19.0), ("unps", 15.0)):
+        fake_run(sweep, f"method={method},subject=Vase", files=True, study="baselines", subject="Vase",
+                 method=method, normal_mae=value)
+    text = report(sweep).read_text()
+    assert "| Vase | 20.00 | 18.00 | 19.00 | 15.00 |" in text
+    assert {"grid_Vase.png", "reflectance_maps.png"} <= {p.name for p in (sweep / "report").iterdir()}
+
+    rose = tmp_path / "rose"
+    fake_run(rose, "light=gt,subject=Rose", files=True, study="rose", subject="Rose", light="gt",
+             normal_mae=40.0)
+    assert "| Rose | gt | 40.00 | 1.00 | 90.0 % |" in report(rose).read_text()
+    assert (rose / "report" / "rose.png").is_file()
+
+
+def test_report_refuses_what_it_cannot_read(tmp_path):
+    with pytest.raises(InputError, match="no finished run"):
+        report(tmp_path)
+    fake_run(tmp_path, "a", study="noise", subject="Vase", normal_mae=1.0)
+    fake_run(tmp_path, "b", study="table1", subject="Vase", normal_mae=1.0)
+    with pytest.raises(InputError, match="runs of several studies"):
+        report(tmp_path)
+    with pytest.raises(InputError, match="not a folder"):
+        report(tmp_path / "nowhere")
+
+
+def test_any_other_sweep_gets_one_row_per_run(tmp_path):
+    fake_run(tmp_path, "method=woodham", subject="Vase", method="woodham", normal_mae=20.0)
+    fake_run(tmp_path, "method=rpca", subject="Vase", method="rpca", normal_mae=18.5)
+    text = report(tmp_path).read_text()
+    assert "| method | normal MAE (°) | light MAE (°) | time (s) | folder |" in text
+    assert "| rpca | 18.50 | 5.00 | 10.0 | method=rpca |" in text
+
+
+# --------------------------------------------------------------------------- the notebook
+
+
+def test_notebook_is_committed_without_outputs():
+    notebook = nbformat.read(NOTEBOOK, as_version=4)
+    code = [c for c in notebook.cells if c.cell_type == "code"]
+    assert all(not c.outputs and c.execution_count is None for c in code)
+    assert "parameters" in code[0].metadata.get("tags", [])
+
+
+def test_notebook_runs_at_tiny_size(tmp_path):
+    from nbclient import NotebookClient
+
+    notebook = nbformat.read(NOTEBOOK, as_version=4)
+    notebook.cells[1].source = ('SUBJECT = "lambertian"\nSTEPS = 10\n'
+                                'OVERRIDES = ["subject.size=24", "subject.n_lights=12"]')
+    NotebookClient(notebook, timeout=300, kernel_name="python3",
+                   resources={"metadata": {"path": str(tmp_path)}}).execute()
+    printed = "".join(o.get("text", "") for c in notebook.cells if c.cell_type == "code" for o in c.outputs)
+    assert "lambertian-sphere: 12 images of 24×24 pixels" in printed
+    assert "fit: normal MAE" in printed
+    images = [o for c in notebook.cells if c.cell_type == "code" for o in c.outputs
+              if "image/png" in o.get("data", {})]
+    assert len(images) >= 5
