@@ -150,31 +150,9 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
     log.info("unps (%s preset): working grid %d×%d (%d object pixels, ×%d coarser than the subject), "
              "%d images", preset.name, w, h, work.mask.sum(), factor, work.n_images)
 
-    init = robust_init(work, light_directions)
-    mask = work.mask
-    gray_albedo = init.albedo.mean(-1)
-    scale = float(np.percentile(work.images[:, mask], 99))    # the white level: images in [0, ~1]
-    if not scale > 0:
-        raise InputError(f"subject {subject.name!r}: the images are black on the object (99th "
-                         f"percentile {scale}); nothing to fit")
-    images = torch.as_tensor(work.images / scale).permute(0, 3, 1, 2).contiguous()
-
-    solver = None
-    if interreflection["enabled"]:
-        solver = Interreflection(mask, physical_albedo(gray_albedo, mask),
-                                 interreflection["downsample"], interreflection["occlusion"])
-        log.info("interreflections: %d facets (×%d)", solver.n_facets, solver.factor)
-
-    n = work.n_images
-    normal_net = NormalNet(n, preset.width, preset.depth, preset.first_kernel)
-    reflectance_net = ReflectanceNet(preset.width, preset.reflectance_width, preset.reflectance_depth)
-    true_normals = (None if work.normals is None
-                    else torch.as_tensor(work.normals).permute(2, 0, 1).contiguous())
-    system = InverseRendering(
-        normal_net, reflectance_net, images, mask, torch.as_tensor(light_directions, dtype=torch.float32),
-        torch.as_tensor(init.normals).permute(2, 0, 1).contiguous(), solver, schedule,
-        refine_lights=refine_lights, true_normals=true_normals,
-        fingerprint=fingerprint(work, light_directions, settings))
+    system, scale = build_system(work, light_directions, preset, interreflection, refine_lights,
+                                 fingerprint(work, light_directions, settings))
+    solver = system.interreflection
     parameters = sum(p.numel() for p in system.parameters() if p.requires_grad)
     log.info("networks: %.2f M parameters; %d steps", parameters / 1e6, schedule.steps)
 
@@ -183,22 +161,64 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
     log.info("fitted %d steps in %.1f s (%.3f s/step)", steps_run, seconds, seconds / max(steps_run, 1))
 
     rendering = final_rendering(system, schedule.images_per_step or 16, scale)
-    normals = rendering.pop("normals")
-    if factor > 1:
-        normals = upsample_normals(normals, mask, cropped.resolution, factor)
-    full_normals = uncrop(normals, cropped, subject)
-    object_normals = full_normals[subject.mask]
-    directions, scales = rendering["light_directions"], rendering["light_scales"]
-    pixels = subject.images[:, subject.mask] / scales[:, None, None]
-    albedo = np.zeros_like(full_normals)
-    albedo[subject.mask] = rgb_albedo(pixels, object_normals, directions)
+    normals, albedo = on_subject_grid(rendering.pop("normals"), work.mask, factor, cropped, subject,
+                                      rendering["light_directions"], rendering["light_scales"])
     info = {"fit_resolution": [h, w], "fit_downsample": factor, "fit_steps": schedule.steps,
             "fit_s_per_step": seconds / max(steps_run, 1), "resumed_from_step": resumed_from,
             "parameters": parameters, "facets": solver.n_facets if solver else 0, "preset": preset.name,
             "interreflection": bool(interreflection["enabled"]),
             "facet_downsample": solver.factor if solver else None}
-    return Estimate(full_normals, albedo,
-                    rendering=Rendering(mask=mask, observed=work.images, info=info, **rendering))
+    return Estimate(normals, albedo,
+                    rendering=Rendering(mask=work.mask, observed=work.images, info=info, **rendering))
+
+
+def build_system(work: Subject, light_directions: np.ndarray, preset: Preset, interreflection: dict,
+                 refine_lights: bool, run_fingerprint: str) -> tuple[InverseRendering, float]:
+    """The robust initialisation, the networks and the interreflection solve for the working grid,
+    around one :class:`InverseRendering`; also the white level the images were divided by.
+
+    Raises:
+        InputError: the images are black on the object.
+    """
+    init = robust_init(work, light_directions)
+    mask = work.mask
+    scale = float(np.percentile(work.images[:, mask], 99))    # the white level: images in [0, ~1]
+    if not scale > 0:
+        raise InputError(f"subject {work.name!r}: the images are black on the object (99th "
+                         f"percentile {scale}); nothing to fit")
+    images = torch.as_tensor(work.images / scale).permute(0, 3, 1, 2).contiguous()
+
+    solver = None
+    if interreflection["enabled"]:
+        solver = Interreflection(mask, physical_albedo(init.albedo.mean(-1), mask),
+                                 interreflection["downsample"], interreflection["occlusion"])
+        log.info("interreflections: %d facets (×%d)", solver.n_facets, solver.factor)
+
+    normal_net = NormalNet(work.n_images, preset.width, preset.depth, preset.first_kernel)
+    reflectance_net = ReflectanceNet(preset.width, preset.reflectance_width, preset.reflectance_depth)
+    true_normals = (None if work.normals is None
+                    else torch.as_tensor(work.normals).permute(2, 0, 1).contiguous())
+    system = InverseRendering(
+        normal_net, reflectance_net, images, mask, torch.as_tensor(light_directions, dtype=torch.float32),
+        torch.as_tensor(init.normals).permute(2, 0, 1).contiguous(), solver, preset.schedule,
+        refine_lights=refine_lights, true_normals=true_normals, fingerprint=run_fingerprint)
+    return system, scale
+
+
+def on_subject_grid(normals: np.ndarray, mask: np.ndarray, factor: int, cropped: Subject,
+                    subject: Subject, light_directions: np.ndarray,
+                    light_scales: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The fitted (h, w, 3) normals on the working grid (``cropped`` block-averaged ×``factor``,
+    with ``mask``) → (H, W, 3) unit normals on the subject's grid, and the RGB albedo there by
+    least squares under the lights used (directions (n, 3), intensity scales (n,)).
+    """
+    if factor > 1:
+        normals = upsample_normals(normals, mask, cropped.resolution, factor)
+    full_normals = uncrop(normals, cropped, subject)
+    pixels = subject.images[:, subject.mask] / light_scales[:, None, None]
+    albedo = np.zeros_like(full_normals)
+    albedo[subject.mask] = rgb_albedo(pixels, full_normals[subject.mask], light_directions)
+    return full_normals, albedo
 
 
 def train(system: InverseRendering, schedule: Schedule, output_dir: str | Path | None,
