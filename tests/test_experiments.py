@@ -133,9 +133,9 @@ def test_table1_report(tmp_path):
                      light=light, normal_mae=value)
     (sweep / "light=gt,subject=Face" / ".hydra").mkdir(parents=True)   # started, never finished
     text = report(sweep).read_text()
-    assert "| Vase | 10.00 | 12.00 | +2.00 | 11.00 | 16.40 | 19.91 | +3.51 |" in text
-    assert "| cat | 6.00 | 9.50 | +3.50 | 7.00 | — | 7.91 | — |" in text
-    assert "| **average, all** | 8.00 | 10.75 | +2.75 | 9.00 |" in text
+    assert "| Vase | 10.00 | 12.00 | +2.00 | 11.00 | 5.00 → 5.00 | 16.40 | 19.91 | +3.51 |" in text
+    assert "| cat | 6.00 | 9.50 | +3.50 | 7.00 | 5.00 → 5.00 | — | 7.91 | — |" in text
+    assert "| **average, all** | 8.00 | 10.75 | +2.75 | 9.00 |  | — | 13.91 | — |" in text
     assert "average, the paper's six" not in text   # only two of them ran
     assert "**1 unfinished runs** (no metrics.json): `light=gt,subject=Face`" in text
     assert (sweep / "report" / "table1.png").stat().st_size > 0

@@ -201,26 +201,35 @@ def picture_grid(cells: Sequence[Sequence[tuple[str, np.ndarray | None]]], title
 
 def report_table1(runs: Sequence[Run], out: Path) -> tuple[str, list[Path]]:
     subjects = subject_order(r["subject"] for r in runs)
-    ours = {(s, light): mae(pick(runs, subject=s, light=light)) for s in subjects for light in LIGHTS}
+    found = {(s, light): pick(runs, subject=s, light=light) for s in subjects for light in LIGHTS}
+    ours = {key: mae(run) for key, run in found.items()}
     rows = []
     for s in subjects:
         gt, est, refine = (ours[s, light] for light in LIGHTS)
         paper_gt, paper_est = PAPER_MAE["gt"].get(s), PAPER_MAE["estimated"].get(s)
+        light_errors = " → ".join(fmt(found[s, light]["light_dir_mae"]) for light in LIGHTS[1:]
+                                  if found[s, light] is not None)
         rows.append([s, fmt(gt), fmt(est), fmt(None if None in (gt, est) else est - gt, sign=True),
-                     fmt(refine), fmt(paper_gt), fmt(paper_est),
+                     fmt(refine), light_errors or "—", fmt(paper_gt), fmt(paper_est),
                      fmt(None if None in (paper_gt, paper_est) else paper_est - paper_gt, sign=True)])
-    for label, group in (("average, the paper's six", PAPER_SUBJECTS), ("average, all", subjects)):
+    groups = [("average, the paper's six", PAPER_SUBJECTS)]
+    if set(subjects) != set(PAPER_SUBJECTS):
+        groups.append(("average, all", subjects))
+    for label, group in groups:
         if not set(group) <= set(subjects):
             continue
         gt, est, refine = (mean_of(ours[s, light] for s in group) for light in LIGHTS)
         paper_gt = mean_of(PAPER_MAE["gt"].get(s) for s in group)
         paper_est = mean_of(PAPER_MAE["estimated"].get(s) for s in group)
         rows.append([f"**{label}**", fmt(gt), fmt(est),
-                     fmt(None if None in (gt, est) else est - gt, sign=True), fmt(refine),
+                     fmt(None if None in (gt, est) else est - gt, sign=True), fmt(refine), "",
                      fmt(paper_gt), fmt(paper_est),
                      fmt(None if None in (paper_gt, paper_est) else paper_est - paper_gt, sign=True)])
     table = markdown_table(["subject", "GT light", "estimated", "est. − GT", "refine",
-                            "paper GT", "paper est.", "paper est. − GT"], rows)
+                            "light error: est. → refined", "paper GT", "paper est.", "paper est. − GT"],
+                           rows)
+    table += ("\n\nNormal MAE in degrees; the light error is the direction MAE of the lights used "
+              "(degrees).")
 
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(1.1 * len(subjects) + 2, 3.6))
@@ -294,15 +303,26 @@ def report_facets(runs: Sequence[Run], out: Path) -> tuple[str, list[Path]]:
         "Facets in the interreflection kernel (the paper's counts are at its own resolution, ×4):\n\n"
         + markdown_table(["subject"] + [s for s in settings if s != "off"] + ["paper (×4)"], facet_rows)])
 
+    # MAE as the change from interreflection=off where that run exists: the subjects' MAEs differ
+    # by tens of degrees, the settings' by tenths.
+    def mae_shown(setting: str, s: str) -> float:
+        if (setting, s) not in cell:
+            return np.nan
+        return cell[setting, s]["normal_mae"] - (cell["off", s]["normal_mae"] if ("off", s) in cell else 0)
+
+    relative = any(("off", s) in cell for s in subjects)
     plt = _pyplot()
     fig, (ax_mae, ax_time) = plt.subplots(1, 2, figsize=(9, 3.4))
     x = np.arange(len(settings))
     for s in subjects:
-        ax_mae.plot(x, [cell[k]["normal_mae"] if (k := (setting, s)) in cell else np.nan
-                        for setting in settings], "o-", label=s)
+        ax_mae.plot(x, [mae_shown(setting, s) for setting in settings], "o-",
+                    label=s if ("off", s) in cell or not relative else f"{s} (absolute)")
         ax_time.plot(x, [cell[k]["runtime_s"] if (k := (setting, s)) in cell else np.nan
                          for setting in settings], "o-", label=s)
-    for ax, label in ((ax_mae, "normal MAE (°)"), (ax_time, "fit time (s)")):
+    mae_label = "normal MAE − MAE with it off (°)" if relative else "normal MAE (°)"
+    if relative:
+        ax_mae.axhline(0, color="grey", lw=0.8)
+    for ax, label in ((ax_mae, mae_label), (ax_time, "fit time (s)")):
         ax.set_xticks(x, settings)
         ax.set_xlabel("facet grid (interreflection kernel)")
         ax.set_ylabel(label)
@@ -325,7 +345,8 @@ def report_rose(runs: Sequence[Run], out: Path) -> tuple[str, list[Path]]:
     rows.append(["Rose (paper)", "estimated", fmt(PAPER_ROSE_MAE), "—", "—"])
     table = markdown_table(["subject", "light", "MAE (°)", "median (°)", "< 30°"], rows)
     cells = [[("ground truth", read_rgb(r.folder / "normals_gt.png")), *qualitative_row(r),
-              ("reconstructed images", read_rgb(r.folder / "reconstruction.png"))] for r in ordered]
+              ("observed / reconstructed / difference", read_rgb(r.folder / "reconstruction.png"))]
+             for r in ordered]
     fig = picture_grid(cells, "The failure case: Rose (supplementary Fig. 1)")
     return table, [save(fig, out / "rose.png")]
 
@@ -383,7 +404,10 @@ def report_baselines(runs: Sequence[Run], out: Path) -> tuple[str, list[Path]]:
     reflectance = [(s, image) for s, image in reflectance if image is not None]
     if reflectance:
         plt = _pyplot()
-        fig, axes = plt.subplots(len(reflectance), 1, figsize=(10, 1.9 * len(reflectance)), squeeze=False)
+        width = 10.0   # inches; each row as tall as its contact sheet at this width, plus its title
+        heights = [width * image.shape[0] / image.shape[1] + 0.3 for _, image in reflectance]
+        fig, axes = plt.subplots(len(reflectance), 1, figsize=(width, sum(heights) + 0.5), squeeze=False,
+                                 gridspec_kw={"height_ratios": heights}, layout="constrained")
         for ax, (s, image) in zip(axes[:, 0], reflectance):
             ax.imshow(image, interpolation="nearest")
             ax.set_axis_off()
