@@ -151,6 +151,8 @@ def test_noise_report_and_it_is_reproducible(tmp_path):
     assert "| subject | σ = 0 | σ = 0.1 |" in first.read_text()
     assert "| Vase | 10.00 | 12.00 |" in first.read_text()
     assert "| **average** | 7.00 | 9.00 |" in first.read_text()
+    assert "Direction MAE (°) of the lights used" in first.read_text()
+    assert "| Face | 5.00 | 5.00 |" in first.read_text()          # the light errors
     second = report(sweep, tmp_path / "b")
     for name in ("results.md", "noise.png"):
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
