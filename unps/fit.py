@@ -24,6 +24,7 @@ from hydra.utils import instantiate
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
+from unps.allocator import keep_freed_memory
 from unps.data.subject import Subject, add_noise
 from unps.errors import InputError, exit_on_bad_input
 from unps.geometry import integrate_normals
@@ -59,6 +60,7 @@ def fit(cfg: DictConfig) -> dict:
     from unps.io.outputs import write_fit_outputs
 
     seed_everything(cfg.seed, workers=True, verbose=False)
+    keep_freed_memory()
     out = Path(cfg.paths.output_dir)
     start = time.perf_counter()
     subject = instantiate(cfg.subject, _partial_=True)()   # called here so errors reach the user

@@ -1,0 +1,24 @@
+import ctypes.util
+import sys
+
+import pytest
+
+from unps.allocator import keep_freed_memory
+
+
+def glibc() -> bool:
+    import os
+
+    return sys.platform.startswith("linux") and "glibc" in os.confstr("CS_GNU_LIBC_VERSION").lower()
+
+
+@pytest.mark.skipif(not glibc(), reason="mallopt is glibc's")
+def test_glibc_accepts_the_thresholds():
+    assert ctypes.util.find_library("c") is not None
+    assert keep_freed_memory() is True
+    assert keep_freed_memory() is True   # idempotent: a second fit in one process
+
+
+def test_a_no_op_elsewhere(monkeypatch):
+    monkeypatch.setattr(sys, "platform", "darwin")
+    assert keep_freed_memory() is False
