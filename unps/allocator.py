@@ -2,7 +2,7 @@
 
 glibc's malloc serves blocks above its mmap threshold with fresh ``mmap`` calls and unmaps them on
 ``free``, so a fit that allocates the same multi-megabyte tensors every step pays for zeroed pages
-each time: a quarter of a DiLiGenT fit's CPU time went to the kernel. Raising the mmap threshold to
+each time: up to a quarter of a DiLiGenT fit's CPU time went to the kernel. Raising the mmap threshold to
 its ceiling and the trim threshold to 1 GiB keeps such blocks in the heap; the arithmetic, and so
 every result, is unchanged.
 """
