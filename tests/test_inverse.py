@@ -10,7 +10,8 @@ from hydra import compose, initialize_config_module
 from unps.data.analytic import render_lambertian
 from unps.errors import Diverged, InputError
 from unps.fit import fit
-from unps.inverse.fit import Preset, neural_inverse_rendering, upsample_normals, working_factor
+from unps.inverse.fit import (Preset, neural_inverse_rendering, upsample_normals, upsample_with_detail,
+                              working_factor)
 from unps.inverse.interreflection import Interreflection, physical_albedo
 from unps.inverse.networks import NormalNet, ReflectanceNet, shading, specular_map
 from unps.inverse.system import InverseRendering
@@ -133,6 +134,32 @@ def test_working_factor_and_upsampled_normals():
     up = upsample_normals(normals, mask, (7, 8), 2)
     assert up.shape == (7, 8, 3)
     np.testing.assert_allclose(up[..., 2], 1, atol=1e-6)
+
+
+def test_detail_is_added_to_the_upsampled_fit():
+    rng = np.random.default_rng(0)
+    fine = rng.normal(size=(8, 8, 3)) + [0, 0, 3]
+    fine /= np.linalg.norm(fine, axis=-1, keepdims=True)
+    coarse = fine.reshape(4, 2, 4, 2, 3).mean((1, 3))
+    coarse /= np.linalg.norm(coarse, axis=-1, keepdims=True)
+    mask = np.ones((4, 4), bool)
+    # a fit equal to the coarse initialisation gets the fine initialisation back exactly
+    np.testing.assert_allclose(upsample_with_detail(coarse, coarse, fine, mask, 2), fine, atol=1e-6)
+    # a fit that differs keeps its own shape: a tilt survives, with the detail on top
+    tilted = np.broadcast_to(np.array([0.6, 0, 0.8]), (4, 4, 3))
+    out = upsample_with_detail(tilted, coarse, fine, mask, 2)
+    np.testing.assert_allclose(np.linalg.norm(out, axis=-1), 1, atol=1e-6)
+    assert np.mean(out[..., 0]) > 0.5 and not np.allclose(out, out[0, 0])
+
+
+def test_a_fit_on_a_coarser_working_grid_returns_full_resolution_normals(sphere):
+    estimate = neural_inverse_rendering(sphere, sphere.light_directions,
+                                        {**TINY, "max_pixels": int(sphere.mask.sum()) // 3}, NAYAR)
+    assert estimate.rendering.info["fit_downsample"] == 2
+    assert estimate.normals.shape == sphere.normals.shape
+    np.testing.assert_allclose(np.linalg.norm(estimate.normals[sphere.mask], axis=-1), 1, atol=1e-5)
+    assert not estimate.normals[~sphere.mask].any()
+    assert angular_error(estimate.normals, sphere.normals)[sphere.mask].mean() < 30
 
 
 def sphere_system(prior_weight):
