@@ -219,7 +219,7 @@ def upsample_with_detail(normals: np.ndarray, coarse_init: np.ndarray, fine_init
     The detail is what the robust initialisation has on the fine grid and loses on the coarse
     one: fine_init − upsampled coarse_init. It is added to the upsampled fit before normalising,
     so the fit decides the shape at its own scale and the initialisation only adds the finer
-    scales (on DiLiGenT pot1, ×2, this is worth about 0.4°).
+    scales (on DiLiGenT at ×2 this lowers the MAE by 0.4–0.6° on pot1 and 0.1–0.2° on cat).
 
     Args:
         normals: (h, w, 3) fitted unit normals.
