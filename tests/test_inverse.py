@@ -154,7 +154,7 @@ def test_detail_is_added_to_the_upsampled_fit():
 
 def test_a_fit_on_a_coarser_working_grid_returns_full_resolution_normals(sphere):
     estimate = neural_inverse_rendering(sphere, sphere.light_directions,
-                                        {**TINY, "max_pixels": int(sphere.mask.sum()) // 3}, NAYAR)
+                                        {**TINY, "max_pixels": sphere.mask.sum() // 3}, NAYAR)
     assert estimate.rendering.info["fit_downsample"] == 2
     assert estimate.normals.shape == sphere.normals.shape
     np.testing.assert_allclose(np.linalg.norm(estimate.normals[sphere.mask], axis=-1), 1, atol=1e-5)

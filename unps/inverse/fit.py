@@ -119,7 +119,7 @@ def fingerprint(subject: Subject, light_directions: np.ndarray, settings: dict) 
     digest = hashlib.sha256()
     for array in (subject.images, subject.mask, light_directions):
         digest.update(np.ascontiguousarray(array).tobytes())
-    digest.update(json.dumps(settings, sort_keys=True).encode())
+    digest.update(json.dumps(settings, sort_keys=True, default=lambda v: np.asarray(v).tolist()).encode())
     return digest.hexdigest()
 
 
