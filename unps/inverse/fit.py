@@ -226,6 +226,10 @@ def upsample_with_detail(normals: np.ndarray, coarse_init: np.ndarray, fine_init
         coarse_init: (h, w, 3) robust initialisation on the coarse grid.
         fine_init: (H, W, 3) robust initialisation on the fine grid, with H ≤ h·factor, W ≤ w·factor.
         mask: (h, w) bool, the coarse grid's object.
+
+    Returns:
+        (H, W, 3) unit normals on the fine grid's object (where fine_init is nonzero); off it the
+        values are not normals and the caller masks them (:func:`uncrop` does).
     """
     shape = fine_init.shape[:2]
     detail = fine_init - upsample_normals(coarse_init, mask, shape, factor)
