@@ -2,6 +2,7 @@
 
     python experiments/neural_inverse_rendering/benchmark.py [--out runs/nir] [--preset fast]
     python experiments/neural_inverse_rendering/benchmark.py --only diligent --preset paper
+    python experiments/neural_inverse_rendering/benchmark.py --only diligent --objects ball --lights gt
 
 Every row is one `python -m unps.fit` run in its own process, in `<out>/<row>/` (a rerun skips
 rows whose metrics.json exists, and a killed row resumes from its checkpoint); peak memory is the
@@ -31,6 +32,7 @@ import torch
 DILIGENT = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "DiLiGenT"
 OBJECTS = {"ball": "pmsData/ballPNG", "cat": "pmsData_crop/catPNG", "pot1": "pmsData_crop/pot1PNG"}
 PAPER = {"ball": 3.78, "cat": 7.91, "pot1": 8.75}       # the paper's uncalibrated MAE (°)
+LIGHTS = ["estimated", "refine", "gt"]
 SYNTHETIC = ["Vase", "BrokenPot", "Tablet1"]
 
 
@@ -54,13 +56,13 @@ def run(out: Path, *overrides: str) -> dict:
     return result
 
 
-def diligent(out: Path, preset: str) -> None:
+def diligent(out: Path, preset: str, objects: list[str], lights: list[str]) -> None:
     print(f"\nDiLiGenT, 96 images, preset={preset} (normal MAE °; unps time and peak memory)")
     print(f"{'object':<6} {'light':<9} {'light °':>7} {'RPCA °':>7} {'unps °':>7} {'paper °':>7} "
           f"{'grid':>9} {'s':>6} {'s/step':>6} {'GB':>5}")
-    for name, folder in OBJECTS.items():
-        subject = ["subject=diligent", f"subject.root={DILIGENT / folder}"]
-        for light in ("estimated", "refine", "gt"):
+    for name in objects:
+        subject = ["subject=diligent", f"subject.root={DILIGENT / OBJECTS[name]}"]
+        for light in lights:
             start = "estimated" if light == "refine" else light     # the lights refinement starts from
             rpca = run(out / f"{name}-{start}-rpca", *subject, f"light={start}", "method=rpca")
             unps = run(out / f"{name}-{light}-unps-{preset}", *subject, f"light={light}", "method=unps",
@@ -103,6 +105,10 @@ def main():
     parser.add_argument("--preset", default="fast")
     parser.add_argument("--only", choices=["diligent", "synthetic", "speed"])
     parser.add_argument("--paper-steps", type=int, default=5)
+    parser.add_argument("--objects", nargs="+", choices=list(OBJECTS), default=list(OBJECTS),
+                        help="DiLiGenT objects (all three by default)")
+    parser.add_argument("--lights", nargs="+", choices=LIGHTS, default=LIGHTS,
+                        help="DiLiGenT light modes (all three by default)")
     args = parser.parse_args()
     device = torch.cuda.get_device_name() if torch.cuda.is_available() else "CPU"
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, {device}; "
@@ -110,7 +116,7 @@ def main():
     if args.only in (None, "diligent"):
         if not DILIGENT.is_dir():
             sys.exit(f"{DILIGENT}: DiLiGenT not found (../shared/data beside the repository)")
-        diligent(args.out, args.preset)
+        diligent(args.out, args.preset, args.objects, args.lights)
     if args.only in (None, "synthetic"):
         synthetic(args.out, args.preset)
     if args.only in (None, "speed"):
