@@ -43,6 +43,15 @@ def test_crops_woodham_reference_and_robust_init_below_it(name, reference):
     assert mae(s, robust_init(s, s.light_directions)) < woodham_mae
 
 
+@pytest.mark.parametrize("name", ["catPNG", "pot1PNG"])
+def test_reading_the_crops_as_truncated_lowers_both_errors(name):
+    rounded = read_diligent(diligent_object(f"pmsData_crop/{name}"))
+    floored = read_diligent(diligent_object(f"pmsData_crop/{name}"), quantization="floor")
+    for solve in (woodham, robust_init):
+        assert (mae(floored, solve(floored, floored.light_directions))
+                < mae(rounded, solve(rounded, rounded.light_directions)) - 0.3), solve.__name__
+
+
 def test_a_crop_round_trips_bit_for_bit(tmp_path):
     s = read_diligent(diligent_object("pmsData_crop/catPNG"), drop=["8-95"])
     write_diligent(s, tmp_path / "cat")

@@ -9,7 +9,7 @@ from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
 from hydra.core.override_parser.overrides_parser import OverridesParser
 
 from unps.data.analytic import render_lambertian
-from unps.data.diligent import find_diligent_object, write_diligent
+from unps.data.diligent import find_diligent_object, read_diligent, read_diligent_object, write_diligent
 from unps.errors import InputError
 from unps.fit import fit
 from unps.io.images import write_png8
@@ -87,6 +87,20 @@ def test_diligent_objects_by_name(tmp_path):
         find_diligent_object(tmp_path, "pot1")
     with pytest.raises(InputError, match="DiLiGenT not found.*UNPS_DILIGENT_DIR"):
         find_diligent_object(tmp_path / "nowhere", "cat")
+
+
+def test_diligent_crops_are_read_as_truncated_and_originals_as_rounded(tmp_path):
+    subject = render_lambertian(size=16, n_lights=4)
+    for layout in ("pmsData_crop", "pmsData"):
+        write_diligent(subject, tmp_path / layout / "catPNG")
+        folder = tmp_path / layout / "catPNG"
+        expected = "floor" if layout == "pmsData_crop" else "round"
+        np.testing.assert_array_equal(read_diligent_object(tmp_path, "cat").images,
+                                      read_diligent(folder, quantization=expected).images)
+        assert not np.array_equal(read_diligent(folder, quantization="round").images,
+                                  read_diligent(folder, quantization="floor").images)
+    with pytest.raises(InputError, match="quantization must be round or floor.*'nearest'"):
+        read_diligent_object(tmp_path, "cat", quantization="nearest")
 
 
 def test_subject_by_name_runs_end_to_end(tmp_path):

@@ -26,6 +26,33 @@ def test_8_bit_and_gray_images(tmp_path):
     np.testing.assert_allclose(read_image(tmp_path / "g.png"), 0.2)
 
 
+def test_floor_quantization_reads_a_level_as_the_middle_of_its_interval(tmp_path):
+    cv2.imwrite(str(tmp_path / "8.png"), np.array([[0, 1, 51, 255]], np.uint8))
+    cv2.imwrite(str(tmp_path / "16.png"), np.array([[0, 1, 65535]], np.uint16))
+    np.testing.assert_allclose(read_image(tmp_path / "8.png")[0, :, 0], [0, 1 / 255, 0.2, 1])
+    np.testing.assert_allclose(read_image(tmp_path / "8.png", "floor")[0, :, 0],
+                               [0, 1.5 / 255, 51.5 / 255, 255.5 / 255])   # zero (shadow) stays zero
+    np.testing.assert_allclose(read_image(tmp_path / "16.png", "floor")[0, :, 0],
+                               [0, 1.5 / 65535, 65535.5 / 65535])
+    with pytest.raises(InputError, match="quantization must be round or floor.*'ceil'"):
+        read_image(tmp_path / "8.png", "ceil")
+
+
+def test_a_truncated_dark_capture_is_read_without_bias_with_floor(tmp_path, sphere):
+    """8-bit truncation of a dark capture darkens it by half a level on average; floor undoes that."""
+    observed = sphere.observed_images()
+    dark = observed * (20.0 / observed.max())                     # in levels; the brightest is 20
+    folder = write_diligent(sphere, tmp_path / "obj")
+    (folder / "unps_subject.json").unlink()
+    for name, levels in zip((folder / "filenames.txt").read_text().split(), dark):
+        cv2.imwrite(str(folder / name), np.floor(levels[..., ::-1]).astype(np.uint8))
+    lit = (dark >= 1).all(-1) & sphere.mask[None]
+    bias = {q: (read_diligent(folder, quantization=q).observed_images() * 255 - dark)[lit].mean()
+            for q in ("round", "floor")}
+    assert bias["round"] == pytest.approx(-0.5, abs=0.05)
+    assert abs(bias["floor"]) < 0.05
+
+
 def test_missing_and_corrupt_images_are_named(tmp_path):
     with pytest.raises(InputError, match="nope.png: image file not found"):
         read_image(tmp_path / "nope.png")

@@ -31,17 +31,19 @@ from unps.metrics import normal_metrics
 from unps.solvers.rpca import robust_init
 
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
-OBJECTS = {"ball": "DiLiGenT/pmsData/ballPNG", "cat": "DiLiGenT/pmsData_crop/catPNG",
-           "pot1": "DiLiGenT/pmsData_crop/pot1PNG"}
+# (folder, whether it is one of PS-FCN's 8-bit crops, which were made as floor(16-bit / 256))
+OBJECTS = {"ball": ("DiLiGenT/pmsData/ballPNG", False),
+           "cat": ("DiLiGenT/pmsData_crop/catPNG", True),
+           "pot1": ("DiLiGenT/pmsData_crop/pot1PNG", True)}
 
 
-def diligent(data: Path, checkpoint):
+def diligent(data: Path, checkpoint, crop_quantization: str = "floor"):
     print("DiLiGenT, all 96 images        dir MAE   int err   RPCA(est) °  RPCA(GT) °")
-    for name, relative in OBJECTS.items():
+    for name, (relative, crop) in OBJECTS.items():
         if not (data / relative).is_dir():
             print(f"{name:<6} skipped: {data / relative} not found")
             continue
-        subject = read_diligent(data / relative)
+        subject = read_diligent(data / relative, quantization=crop_quantization if crop else "round")
         lights = estimate_lights(subject, checkpoint)
         errors = light_errors(lights, subject)
         est = robust_init(with_lights(subject, lights), lights.directions)
@@ -102,6 +104,8 @@ def main():
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
     parser.add_argument("--merl-dir", type=Path, help="a folder of MERL .binary files")
     parser.add_argument("--samples", type=int, default=64)
+    parser.add_argument("--crop-quantization", choices=["floor", "round"], default="floor",
+                        help="how to read the 8-bit crops (round: the figures before unps read them as made)")
     args = parser.parse_args()
 
     net, config = load_lightnet(args.checkpoint)
@@ -110,7 +114,7 @@ def main():
           f"{OmegaConf.to_yaml(OmegaConf.create(config['recipe'])).strip().replace(chr(10), ', ')}")
     if notes:
         print(f"trained: {notes}")
-    diligent(args.data, args.checkpoint)
+    diligent(args.data, args.checkpoint, args.crop_quantization)
     families = {"analytic": MaterialBank()}
     if (args.data / "merl_nbrdf").is_dir():
         families["neural"] = MaterialBank(analytic=0, neural_dir=str(args.data / "merl_nbrdf"), neural=1)

@@ -16,6 +16,7 @@ import os
 import re
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -25,8 +26,8 @@ from unps.data.subject import (Frame, Subject, check_light_directions, check_lig
                                prepare)
 from unps.errors import InputError
 from unps.io.files import atomic_dir
-from unps.io.images import read_image, read_mask, srgb_to_linear, write_png8, write_png16, \
-    write_tiff32
+from unps.io.images import check_quantization, read_image, read_mask, srgb_to_linear, \
+    write_png8, write_png16, write_tiff32
 
 log = logging.getLogger(__name__)
 
@@ -42,7 +43,7 @@ IMAGE_FORMATS = {"png16": ".png", "tiff32": ".tiff"}
 
 def read_diligent(root: str | os.PathLike, drop: Sequence[int | str] = (),
                   crop_margin: int | None = None, downsample: int = 1,
-                  name: str | None = None) -> Subject:
+                  name: str | None = None, quantization: str = "round") -> Subject:
     """Read one object folder in the DiLiGenT layout.
 
     Images are divided by their RGB light intensities (without this, errors double).
@@ -54,14 +55,18 @@ def read_diligent(root: str | os.PathLike, drop: Sequence[int | str] = (),
         crop_margin: if set, crop to the mask's bounding box grown by this many pixels.
         downsample: block-average by this factor.
         name: the subject's name; defaults to the folder name without ``PNG``.
+        quantization: ``round``, or ``floor`` for images truncated from a deeper source, such as
+            the 8-bit crops (see :func:`unps.io.images.read_image`).
 
     Raises:
         InputError: a required file is missing, unreadable or inconsistent.
     """
     root = _check_root(root)
+    check_quantization(quantization)
     filenames = _read_filenames(root / FILENAMES)
     subject = _read_layout(root, filenames, mask_file=root / MASK, require_mask=True,
-                           require_lights=True, encoding="linear", name=name)
+                           require_lights=True, encoding="linear", quantization=quantization,
+                           name=name)
     return prepare(subject, drop=drop, crop_margin=crop_margin, downsample=downsample)
 
 
@@ -88,19 +93,30 @@ def find_diligent_object(data_dir: str | os.PathLike, name: str) -> Path:
                      f"{' and '.join(f'{layout}/{name}PNG' for layout in LAYOUTS)})")
 
 
-def read_diligent_object(data_dir: str | os.PathLike, object: str, **options) -> Subject:
+def read_diligent_object(data_dir: str | os.PathLike, object: str, quantization: str = "auto",
+                         **options) -> Subject:
     """Read one DiLiGenT object by name (``subject=ball``, ``subject=cat``…); ``options`` are
-    :func:`read_diligent`'s. Where only the crop is present it is read, and the log says so."""
+    :func:`read_diligent`'s. Where only the crop is present it is read, and the log says so.
+
+    ``quantization="auto"`` reads the crops as ``floor`` (PS-FCN made them as
+    ``floor(16-bit / 256)``) and the original release as ``round``.
+    """
+    if quantization != "auto":
+        check_quantization(quantization)
     root = find_diligent_object(data_dir, object)
-    if root.parent.name != LAYOUTS[0]:
-        log.info("%s: reading the crop %s (the original release is not in %s)",
-                 object, root, Path(data_dir).expanduser())
-    return read_diligent(root, name=object, **options)
+    crop = root.parent.name != LAYOUTS[0]
+    if quantization == "auto":
+        quantization = "floor" if crop else "round"
+    if crop:
+        log.info("%s: reading the crop %s (the original release is not in %s), quantization=%s",
+                 object, root, Path(data_dir).expanduser(), quantization)
+    return read_diligent(root, name=object, quantization=quantization, **options)
 
 
 def read_folder(root: str | os.PathLike, mask: str = MASK, encoding: str = "auto",
                 drop: Sequence[int | str] = (), crop_margin: int | None = None,
-                downsample: int = 1, name: str | None = None) -> Subject:
+                downsample: int = 1, name: str | None = None,
+                quantization: str = "round") -> Subject:
     """Read a plain folder of photos of one object; lights, mask and GT are optional.
 
     Images are those listed in ``filenames.txt`` if present, else every image file in the
@@ -111,10 +127,13 @@ def read_folder(root: str | os.PathLike, mask: str = MASK, encoding: str = "auto
     Args:
         encoding: ``linear`` (raw or 16-bit captures), ``srgb`` (camera JPEGs/PNGs, inverted
             to linear), or ``auto``: ``srgb`` for JPEG files, ``linear`` otherwise.
+        quantization: ``round`` (cameras), or ``floor`` for images truncated from a deeper
+            source (see :func:`unps.io.images.read_image`).
     """
     root = _check_root(root)
     if encoding not in ("auto", "linear", "srgb"):
         raise InputError(f"encoding must be auto, linear or srgb, got {encoding!r}")
+    check_quantization(quantization)
     if (root / FILENAMES).is_file():
         filenames = _read_filenames(root / FILENAMES)
     else:
@@ -131,7 +150,8 @@ def read_folder(root: str | os.PathLike, mask: str = MASK, encoding: str = "auto
         log.info("%s: treating images as %s (encoding=auto; set subject.encoding to override)",
                  root, encoding)
     subject = _read_layout(root, filenames, mask_file=root / mask, require_mask=False,
-                           require_lights=False, encoding=encoding, name=name)
+                           require_lights=False, encoding=encoding, quantization=quantization,
+                           name=name)
     return prepare(subject, drop=drop, crop_margin=crop_margin, downsample=downsample)
 
 
@@ -247,7 +267,8 @@ def _read_matrix(path: Path, what: str) -> np.ndarray:
 
 
 def _read_layout(root: Path, filenames: list[str], mask_file: Path, require_mask: bool,
-                 require_lights: bool, encoding: str, name: str | None) -> Subject:
+                 require_lights: bool, encoding: str, quantization: str,
+                 name: str | None) -> Subject:
     """Read images, lights, mask and ground truth; every check runs before the images load."""
     paths = [root / f for f in filenames]
     missing = [p for p in paths if not p.is_file()]
@@ -270,7 +291,7 @@ def _read_layout(root: Path, filenames: list[str], mask_file: Path, require_mask
         raise InputError(f"{mask_file}: missing")
 
     with ThreadPoolExecutor(os.cpu_count()) as pool:
-        images = list(pool.map(read_image, paths))
+        images = list(pool.map(partial(read_image, quantization=quantization), paths))
     size = images[0].shape
     for p, im in zip(paths, images):
         if im.shape != size:

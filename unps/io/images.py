@@ -16,18 +16,42 @@ from unps.errors import InputError
 from unps.io.files import atomic_path
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
+QUANTIZATIONS = ("round", "floor")
 
 
-def read_image(path: str | os.PathLike) -> np.ndarray:
-    """Read an image as (H, W, 3) float32 RGB.
-
-    8- and 16-bit files are scaled to [0, 1] by their type's maximum (255 or 65535);
-    float files are returned as stored. Gray images are repeated to three channels and an
-    alpha channel is dropped.
+def check_quantization(quantization: str) -> str:
+    """``quantization`` if it is one of :data:`QUANTIZATIONS`.
 
     Raises:
-        InputError: the file is missing or OpenCV cannot decode it.
+        InputError: any other value.
     """
+    if quantization not in QUANTIZATIONS:
+        raise InputError(f"quantization must be {' or '.join(QUANTIZATIONS)} (or auto for a "
+                         f"DiLiGenT object read by name), got {quantization!r}")
+    return quantization
+
+
+def read_image(path: str | os.PathLike, quantization: str = "round") -> np.ndarray:
+    """Read an image as (H, W, 3) float32 RGB.
+
+    8- and 16-bit files are scaled by their type's maximum (255 or 65535); float files are
+    returned as stored. Gray images are repeated to three channels and an alpha channel is dropped.
+
+    Args:
+        quantization: how the file's integers were made from the light, for integer files.
+            ``round`` (cameras and encoders): level k stands for k. ``floor`` (images truncated
+            from a deeper source, e.g. DiLiGenT's 8-bit crops, ``floor(16-bit / 256)``): level
+            k > 0 stands for the interval [k, k + 1) and is read as its middle, k + ½, so values
+            reach (max + ½) / max; level 0 stays 0, since on a photometric-stereo subject it is
+            mostly shadow. Reading a truncated image as ``round`` darkens every pixel by half a
+            level, which matters on dark ones: it steepens the normals
+            (``experiments/classical_diligent``).
+
+    Raises:
+        InputError: the file is missing or OpenCV cannot decode it, or ``quantization`` is
+            unknown.
+    """
+    check_quantization(quantization)
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: image file not found")
@@ -48,7 +72,12 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
         rgb = raw[..., 2::-1]
     else:
         raise InputError(f"{path}: expected a gray, RGB or RGBA image, got {raw.shape[-1]} channels")
-    return (rgb.astype(np.float32) / np.float32(scale)) if scale != 1.0 else rgb.astype(np.float32)
+    if scale == 1.0:
+        return rgb.astype(np.float32)
+    levels = rgb.astype(np.float32)
+    if quantization == "floor":
+        levels[levels > 0] += 0.5
+    return levels / np.float32(scale)
 
 
 def read_mask(path: str | os.PathLike, shape: tuple[int, int]) -> np.ndarray:
