@@ -42,14 +42,22 @@ ROWS = [("ball", "pmsData/ballPNG", "16-bit, full resolution", "round"),
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "DiLiGenT"
 
 
+def slant_bias(normals: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
+    """Mean over the mask of the estimated minus the true slant (angle to the camera axis +z), in
+    degrees: positive where the estimate is too steep. normals, truth: (H, W, 3) unit; mask: (H, W)."""
+    slant = lambda n: np.degrees(np.arccos(np.clip(n[mask][:, 2], -1.0, 1.0)))  # noqa: E731
+    return float((slant(normals) - slant(truth)).mean())
+
+
 def timed(solve, subject, repeats):
+    """(normal MAE °, slant bias °, median seconds) of ``solve`` with the subject's own lights."""
     times, estimate = [], None
     for _ in range(repeats):
         start = time.perf_counter()
         estimate = solve(subject, subject.light_directions)
         times.append(time.perf_counter() - start)
     mae = normal_metrics(estimate.normals, subject.normals, subject.mask)["normal_mae"]
-    return mae, statistics.median(times)
+    return mae, slant_bias(estimate.normals, subject.normals, subject.mask), statistics.median(times)
 
 
 def truncated_copy(folder: Path, out: Path, peak: int) -> Path:
@@ -90,16 +98,16 @@ def main():
     print(f"machine: {cpu_name()}, {os.cpu_count()} cores, torch {torch.__version__} "
           f"({torch.get_num_threads()} threads); lights: ground truth; all 96 images")
     print(f"{'object':<6} {'images':<24} {'H×W':>9} {'pixels':>7} "
-          f"{'Woodham °':>9} {'s':>6} {'RPCA °':>8} {'s':>6}")
+          f"{'Woodham °':>9} {'s':>6} {'RPCA °':>8} {'s':>6} {'RPCA slant bias °':>17}")
     rows = {}
     for name, relative, kind, quantization in ROWS:
         subject = read_diligent(args.data / relative, quantization=quantization)
-        w_mae, w_time = timed(woodham, subject, args.repeats)
-        r_mae, r_time = timed(robust_init, subject, args.repeats)
+        w_mae, _, w_time = timed(woodham, subject, args.repeats)
+        r_mae, r_slant, r_time = timed(robust_init, subject, args.repeats)
         rows[name, quantization] = (w_mae, r_mae, r_time)
         h, w = subject.resolution
         print(f"{name:<6} {kind:<24} {f'{h}×{w}':>9} {subject.mask.sum():>7} "
-              f"{w_mae:>9.2f} {w_time:>6.2f} {r_mae:>8.2f} {r_time:>6.2f}")
+              f"{w_mae:>9.2f} {w_time:>6.2f} {r_mae:>8.2f} {r_time:>6.2f} {r_slant:>+17.2f}")
 
     crops = [(k, q) for k in ("cat", "pot1") for q in ("floor", "round")]
     checks = [
@@ -114,14 +122,17 @@ def main():
         print(f"{'met ' if ok else 'MISSED'}  {text}")
 
     print("\nball truncated to 8 bits (from the 16-bit original above), read both ways")
-    print(f"{'brightest level':<16} {'quantization':<12} {'Woodham °':>9} {'RPCA °':>8}")
+    print(f"{'brightest level':<16} {'quantization':<12} {'Woodham °':>9} {'RPCA °':>8} "
+          f"{'RPCA slant bias °':>17}")
     with tempfile.TemporaryDirectory() as tmp:
         for peak in (255, 43):
             folder = truncated_copy(args.data / ROWS[0][1], Path(tmp) / f"peak{peak}", peak)
             for quantization in ("round", "floor"):
                 subject = read_diligent(folder, quantization=quantization)
-                w_mae, r_mae = (timed(solve, subject, 1)[0] for solve in (woodham, robust_init))
-                print(f"{peak:<16} {quantization:<12} {w_mae:>9.2f} {r_mae:>8.2f}", flush=True)
+                w_mae = timed(woodham, subject, 1)[0]
+                r_mae, r_slant, _ = timed(robust_init, subject, 1)
+                print(f"{peak:<16} {quantization:<12} {w_mae:>9.2f} {r_mae:>8.2f} {r_slant:>+17.2f}",
+                      flush=True)
 
 
 if __name__ == "__main__":

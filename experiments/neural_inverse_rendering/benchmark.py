@@ -11,7 +11,8 @@ process's maximum resident set. Tables printed:
 - DiLiGenT (ball full resolution, cat and pot1 crops read as quantization=floor; 96 images):
   unps with the shipped light network's estimate, with those lights refined (light=refine), and
   with the ground-truth lights, next to the robust initialisation with the same (starting)
-  lights and the paper's published uncalibrated figures; "light °" is the direction error of the lights unps used;
+  lights and the paper's published uncalibrated figures; "light °" is the direction error of
+  the lights unps used;
 - synthetic Vase, BrokenPot, Tablet1 with ground-truth lights: Woodham, the Nayar baseline, and
   unps with interreflection=nayar and interreflection=off;
 - seconds per step of preset=paper on this machine (``--paper-steps`` steps on pot1).
