@@ -21,7 +21,8 @@ from pathlib import Path
 import torch
 from omegaconf import OmegaConf
 
-from unps.data.diligent import read_diligent
+from unps.data.diligent import read_diligent_object
+from unps.errors import InputError
 from unps.fit import light_errors, with_lights
 from unps.lightnet.bins import decode_lights, encode_lights
 from unps.lightnet.estimate import estimate_lights
@@ -31,19 +32,18 @@ from unps.metrics import normal_metrics
 from unps.solvers.rpca import robust_init
 
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
-# (folder, whether it is one of PS-FCN's 8-bit crops, which were made as floor(16-bit / 256))
-OBJECTS = {"ball": ("DiLiGenT/pmsData/ballPNG", False),
-           "cat": ("DiLiGenT/pmsData_crop/catPNG", True),
-           "pot1": ("DiLiGenT/pmsData_crop/pot1PNG", True)}
+OBJECTS = ("ball", "cat", "pot1")
 
 
-def diligent(data: Path, checkpoint, crop_quantization: str = "floor"):
+def diligent(data: Path, checkpoint, quantization: str = "auto"):
+    """``quantization``: ``auto`` reads the 8-bit crops as ``floor``, the way they were made."""
     print("DiLiGenT, all 96 images        dir MAE   int err   RPCA(est) °  RPCA(GT) °")
-    for name, (relative, crop) in OBJECTS.items():
-        if not (data / relative).is_dir():
-            print(f"{name:<6} skipped: {data / relative} not found")
+    for name in OBJECTS:
+        try:
+            subject = read_diligent_object(data / "DiLiGenT", name, quantization=quantization)
+        except InputError as e:
+            print(f"{name:<6} skipped: {e}")
             continue
-        subject = read_diligent(data / relative, quantization=crop_quantization if crop else "round")
         lights = estimate_lights(subject, checkpoint)
         errors = light_errors(lights, subject)
         est = robust_init(with_lights(subject, lights), lights.directions)
@@ -104,8 +104,8 @@ def main():
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
     parser.add_argument("--merl-dir", type=Path, help="a folder of MERL .binary files")
     parser.add_argument("--samples", type=int, default=64)
-    parser.add_argument("--crop-quantization", choices=["floor", "round"], default="floor",
-                        help="how to read the 8-bit crops (round: the figures before unps read them as made)")
+    parser.add_argument("--quantization", choices=["auto", "round"], default="auto",
+                        help="how to read DiLiGenT (round: the crops as read before unps read them as made)")
     args = parser.parse_args()
 
     net, config = load_lightnet(args.checkpoint)
@@ -114,7 +114,7 @@ def main():
           f"{OmegaConf.to_yaml(OmegaConf.create(config['recipe'])).strip().replace(chr(10), ', ')}")
     if notes:
         print(f"trained: {notes}")
-    diligent(args.data, args.checkpoint, args.crop_quantization)
+    diligent(args.data, args.checkpoint, args.quantization)
     families = {"analytic": MaterialBank()}
     if (args.data / "merl_nbrdf").is_dir():
         families["neural"] = MaterialBank(analytic=0, neural_dir=str(args.data / "merl_nbrdf"), neural=1)

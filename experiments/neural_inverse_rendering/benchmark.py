@@ -8,7 +8,7 @@ Every row is one `python -m unps.fit` run in its own process, in `<out>/<row>/` 
 rows whose metrics.json exists, and a killed row resumes from its checkpoint); peak memory is the
 process's maximum resident set. Tables printed:
 
-- DiLiGenT (ball full resolution, cat and pot1 crops read as quantization=floor; 96 images):
+- DiLiGenT (ball full resolution, cat and pot1 crops read as floor by subject=<name>; 96 images):
   unps with the shipped light network's estimate, with those lights refined (light=refine), and
   with the ground-truth lights, next to the robust initialisation with the same (starting)
   lights and the paper's published uncalibrated figures; "light °" is the direction error of
@@ -31,9 +31,7 @@ from pathlib import Path
 import torch
 
 DILIGENT = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "DiLiGenT"
-# the object's folder and how its images are read: PS-FCN made the 8-bit crops as floor(16-bit / 256)
-OBJECTS = {"ball": ("pmsData/ballPNG", "round"), "cat": ("pmsData_crop/catPNG", "floor"),
-           "pot1": ("pmsData_crop/pot1PNG", "floor")}
+OBJECTS = ("ball", "cat", "pot1")
 PAPER = {"ball": 3.78, "cat": 7.91, "pot1": 8.75}       # the paper's uncalibrated MAE (°)
 LIGHTS = ["estimated", "refine", "gt"]
 SYNTHETIC = ["Vase", "BrokenPot", "Tablet1"]
@@ -60,8 +58,8 @@ def run(out: Path, *overrides: str) -> dict:
 
 
 def diligent_subject(name: str) -> list[str]:
-    folder, quantization = OBJECTS[name]
-    return ["subject=diligent", f"subject.root={DILIGENT / folder}", f"subject.quantization={quantization}"]
+    """The object by name, so that the crops are read the way they were made (quantization=auto)."""
+    return [f"subject={name}", f"paths.diligent_dir={DILIGENT}"]
 
 
 def diligent(out: Path, preset: str, objects: list[str], lights: list[str]) -> None:
@@ -113,7 +111,7 @@ def main():
     parser.add_argument("--preset", default="fast")
     parser.add_argument("--only", choices=["diligent", "synthetic", "speed"])
     parser.add_argument("--paper-steps", type=int, default=5)
-    parser.add_argument("--objects", nargs="+", choices=list(OBJECTS), default=list(OBJECTS),
+    parser.add_argument("--objects", nargs="+", choices=OBJECTS, default=list(OBJECTS),
                         help="DiLiGenT objects (all three by default)")
     parser.add_argument("--lights", nargs="+", choices=LIGHTS, default=LIGHTS,
                         help="DiLiGenT light modes (all three by default)")
