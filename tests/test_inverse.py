@@ -10,8 +10,8 @@ from hydra import compose, initialize_config_module
 from unps.data.analytic import render_lambertian
 from unps.errors import Diverged, InputError
 from unps.fit import fit
-from unps.inverse.fit import (Preset, neural_inverse_rendering, upsample_normals, upsample_with_detail,
-                              working_factor)
+from unps.inverse.fit import (Preset, interreflection_bend, neural_inverse_rendering, upsample_normals,
+                              upsample_with_detail, working_factor)
 from unps.inverse.interreflection import Interreflection, physical_albedo
 from unps.inverse.networks import NormalNet, ReflectanceNet, shading, specular_map
 from unps.inverse.system import InverseRendering
@@ -113,6 +113,21 @@ def test_interreflection_bends_groove_normals_toward_each_other_and_leaves_a_pla
     solver.update(flat)
     torch.testing.assert_close(solver(torch.tensor(flat).permute(2, 0, 1)[None]),
                                torch.tensor(flat).permute(2, 0, 1)[None])
+
+
+def test_interreflection_bend_is_the_angle_between_rendered_and_fitted_normals():
+    normals = groove_normals(12)
+    mask = np.ones(normals.shape[:2], bool)
+    solver = Interreflection(mask, np.full(mask.shape, 0.9), downsample=2)
+    solver.update(normals)
+    pseudo = solver(torch.tensor(normals, dtype=torch.float32).permute(2, 0, 1)[None])[0]
+    bend = interreflection_bend(normals, pseudo.permute(1, 2, 0).numpy(), mask)
+    assert 0.5 < bend["mean"] < bend["max"] < 45
+    tilted = np.zeros_like(normals)
+    tilted[..., 1:] = np.sqrt(0.5)          # 45° from +z
+    flat = np.zeros_like(normals)
+    flat[..., 2] = 1
+    assert interreflection_bend(flat, tilted, mask) == pytest.approx({"mean": 45.0, "max": 45.0})
 
 
 def test_physical_albedo_scales_only_when_brighter_than_white():
@@ -260,4 +275,6 @@ def test_interreflection_off_and_in_memory_fits(sphere):
                                             {**NAYAR, "enabled": enabled})
         mae = angular_error(estimate.normals, sphere.normals)[sphere.mask].mean()
         assert estimate.normals.shape == sphere.normals.shape and mae < 30
-        assert estimate.rendering.info["interreflection"] is enabled
+        info = estimate.rendering.info
+        assert info["interreflection"] is enabled
+        assert (info["interreflection_bend_deg"] >= 0) if enabled else info["interreflection_bend_deg"] is None

@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from unps.metrics import angular_error, light_direction_mae, light_intensity_error, normal_metrics
+from unps.metrics import (angular_error, light_direction_mae, light_intensity_error, normal_metrics,
+                          slant_bias)
 
 
 def test_angular_error_known_values():
@@ -21,6 +22,17 @@ def test_normal_metrics_over_the_mask_only():
     assert m["normal_mae"] == pytest.approx(20)
     assert m["normal_median"] == pytest.approx(20)
     assert (m["acc_11_25"], m["acc_30"], m["acc_45"]) == pytest.approx((1 / 3, 2 / 3, 1))
+    assert m["slant_bias"] == pytest.approx(20)          # every tilt is away from the camera
+
+
+def test_slant_bias_is_signed_and_ignores_azimuth():
+    tilt = np.radians(30)
+    gt = np.array([[[np.sin(tilt), 0, np.cos(tilt)], [0, -np.sin(tilt), np.cos(tilt)]]])
+    flatter = np.array([[[0, 0, 1.0], [0, 0, 2.0]]])
+    turned = np.array([[[0, np.sin(tilt), np.cos(tilt)], [np.sin(tilt), 0, np.cos(tilt)]]])
+    mask = np.ones((1, 2), bool)
+    assert slant_bias(flatter, gt, mask) == pytest.approx(-30)
+    assert slant_bias(turned, gt, mask) == pytest.approx(0, abs=1e-9)
 
 
 def test_light_direction_mae():

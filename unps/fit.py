@@ -106,9 +106,9 @@ def fit(cfg: DictConfig) -> dict:
     if subject.normals is not None:
         error = angular_error(estimate.normals, subject.normals)
         metrics.update(normal_metrics(estimate.normals, subject.normals, subject.mask))
-        log.info("normal error: mean %.2f°, median %.2f°, %.1f%% under 11.25° (%.2f s)",
-                 metrics["normal_mae"], metrics["normal_median"], 100 * metrics["acc_11_25"],
-                 runtime)
+        log.info("normal error: mean %.2f°, median %.2f°, %.1f%% under 11.25°, slant bias %+.2f° "
+                 "(%.2f s)", metrics["normal_mae"], metrics["normal_median"], 100 * metrics["acc_11_25"],
+                 metrics["slant_bias"], runtime)
     true_lights = ground_truth(original) if lights.source != "gt" and original.calibrated else None
     write_fit_outputs(out, subject, estimate, depth, lights, metrics, error, true_lights)
     return metrics

@@ -35,7 +35,26 @@ def normal_metrics(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray) -> dict[s
     err = angular_error(pred, gt)[mask]
     return {"normal_mae": float(err.mean()), "normal_median": float(np.median(err)),
             "acc_11_25": float((err < 11.25).mean()), "acc_30": float((err < 30).mean()),
-            "acc_45": float((err < 45).mean())}
+            "acc_45": float((err < 45).mean()), "slant_bias": slant_bias(pred, gt, mask)}
+
+
+def slant_bias(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray) -> float:
+    """Mean over the mask of the predicted minus the true slant, in degrees.
+
+    The slant is a normal's angle to the view axis +z. A positive bias means normals tilted
+    away from the camera (a steeper surface): what a Lambertian reading gives when dim pixels
+    are darker than the model expects (truncated 8-bit levels, Fresnel-weighted diffuse
+    reflection); a negative one means a flatter surface (interreflections, reflectance maps
+    that absorb shading).
+
+    Args:
+        pred, gt: (H, W, 3) normals of any non-zero length.
+        mask: (H, W) bool.
+    """
+    def slant(n):
+        n = n[mask]
+        return np.degrees(np.arccos(np.clip(n[:, 2] / np.linalg.norm(n, axis=-1), -1.0, 1.0)))
+    return float((slant(pred) - slant(gt)).mean())
 
 
 def light_direction_mae(pred: np.ndarray, gt: np.ndarray) -> float:

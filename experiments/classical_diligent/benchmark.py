@@ -28,7 +28,7 @@ import numpy as np
 import torch
 
 from unps.data.diligent import read_diligent
-from unps.metrics import normal_metrics
+from unps.metrics import normal_metrics, slant_bias
 from unps.solvers.rpca import robust_init
 from unps.solvers.woodham import woodham
 
@@ -40,13 +40,6 @@ ROWS = [("ball", "pmsData/ballPNG", "16-bit, full resolution", "round"),
         ("pot1", "pmsData_crop/pot1PNG", "8-bit crop, floor", "floor"),
         ("pot1", "pmsData_crop/pot1PNG", "8-bit crop, round", "round")]
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "DiLiGenT"
-
-
-def slant_bias(normals: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
-    """Mean over the mask of the estimated minus the true slant (angle to the camera axis +z), in
-    degrees: positive where the estimate is too steep. normals, truth: (H, W, 3) unit; mask: (H, W)."""
-    slant = lambda n: np.degrees(np.arccos(np.clip(n[mask][:, 2], -1.0, 1.0)))  # noqa: E731
-    return float((slant(normals) - slant(truth)).mean())
 
 
 def timed(solve, subject, repeats):

@@ -33,6 +33,7 @@ from unps.errors import Diverged, InputError
 from unps.inverse.interreflection import Interreflection, physical_albedo
 from unps.inverse.networks import NormalNet, ReflectanceNet
 from unps.inverse.system import InverseRendering, Schedule
+from unps.metrics import angular_error
 from unps.solvers.rpca import robust_init
 from unps.solvers.woodham import Estimate, rgb_albedo
 
@@ -162,7 +163,11 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
     log.info("fitted %d steps in %.1f s (%.3f s/step)", steps_run, seconds, seconds / max(steps_run, 1))
 
     rendering = final_rendering(system, schedule.images_per_step or 16, scale)
-    normals = rendering.pop("normals")
+    normals, pseudo_normals = rendering.pop("normals"), rendering.pop("pseudo_normals")
+    bend = interreflection_bend(normals, pseudo_normals, work.mask) if solver else None
+    if bend is not None:
+        log.info("interreflections bend the rendered normals by %.2f° on average (%.2f° at most)",
+                 bend["mean"], bend["max"])
     if factor > 1:
         coarse_init = system.init_normals[0].permute(1, 2, 0).cpu().numpy()
         normals = upsample_with_detail(normals, coarse_init, robust_init(cropped, light_directions).normals,
@@ -173,7 +178,8 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
             "fit_s_per_step": seconds / max(steps_run, 1), "resumed_from_step": resumed_from,
             "parameters": parameters, "facets": solver.n_facets if solver else 0, "preset": preset.name,
             "interreflection": bool(interreflection["enabled"]),
-            "facet_downsample": solver.factor if solver else None}
+            "facet_downsample": solver.factor if solver else None,
+            "interreflection_bend_deg": bend["mean"] if bend else None}
     return Estimate(normals, albedo,
                     rendering=Rendering(mask=work.mask, observed=work.images, info=info, **rendering))
 
@@ -209,6 +215,14 @@ def build_system(work: Subject, light_directions: np.ndarray, preset: Preset, in
         torch.as_tensor(init.normals).permute(2, 0, 1).contiguous(), solver, preset.schedule,
         refine_lights=refine_lights, true_normals=true_normals, fingerprint=run_fingerprint)
     return system, scale
+
+
+def interreflection_bend(normals: np.ndarray, pseudo_normals: np.ndarray, mask: np.ndarray) -> dict:
+    """How far ξ_n2 turns the fitted normals: the angle between N_o and N_ny, (h, w, 3) unit
+    each, over the (h, w) ``mask``, as ``mean`` and ``max`` in degrees. It says how much the
+    interreflection model explains on a subject (0 on convex shapes, whose facets see nothing)."""
+    bend = angular_error(normals, pseudo_normals)[mask]
+    return {"mean": float(bend.mean()), "max": float(bend.max())}
 
 
 def upsample_with_detail(normals: np.ndarray, coarse_init: np.ndarray, fine_init: np.ndarray,
@@ -312,7 +326,8 @@ def uncrop(normals: np.ndarray, cropped: Subject, subject: Subject) -> np.ndarra
 
 @torch.no_grad()
 def final_rendering(system: InverseRendering, chunk: int, scale: float) -> dict:
-    """Normals, reflectance maps and reconstructions of every image, without input noise.
+    """Normals N_o and N_ny (the rendered, interreflected ones; N_o without interreflections),
+    reflectance maps and reconstructions of every image, without input noise.
 
     Returns numpy arrays on the working grid; images are multiplied by ``scale`` (the factor
     they were normalised by) to come back in the subject's units.
@@ -325,10 +340,12 @@ def final_rendering(system: InverseRendering, chunk: int, scale: float) -> dict:
         reflectance.append(out["reflectance"].cpu())
         reconstruction.append(out["reconstruction"].cpu())
     normals = out["normals"][0].permute(1, 2, 0).cpu().numpy()
+    pseudo_normals = out["pseudo_normals"][0].permute(1, 2, 0).cpu().numpy()
     directions, scales = system.lights()
 
     def hwc(parts):
         return torch.cat(parts).permute(0, 2, 3, 1).numpy() * scale
 
-    return {"normals": normals, "reflectance": hwc(reflectance), "reconstruction": hwc(reconstruction),
-            "light_directions": directions.cpu().numpy(), "light_scales": scales.cpu().numpy()}
+    return {"normals": normals, "pseudo_normals": pseudo_normals, "reflectance": hwc(reflectance),
+            "reconstruction": hwc(reconstruction), "light_directions": directions.cpu().numpy(),
+            "light_scales": scales.cpu().numpy()}
