@@ -45,20 +45,20 @@ def lambertian(material: dict) -> dict:
 
 
 def render(name: str, spec: dict, material: dict, max_depth: int):
+    """The subject of config ``spec`` with another material and path length (cached)."""
     entry = cached_render(name, spec["shape"], material, spec["texture"], spec["lights"],
                           {**spec["render"], "max_depth": max_depth}, spec["cache_dir"])
     return read_diligent(entry)
 
 
-def predicted_change(subject, downsample: int) -> np.ndarray:
-    """ξ_n2's N_ny − N on the subject's ground-truth normals, (H, W, 3)."""
+def predicted_pseudo_normals(subject, downsample: int) -> np.ndarray:
+    """ξ_n2's N_ny from the subject's ground-truth normals, (H, W, 3)."""
     init = robust_init(subject, subject.light_directions)
     solver = Interreflection(subject.mask, physical_albedo(init.albedo.mean(-1), subject.mask),
                              downsample)
     truth = subject.normals.astype(np.float64)
     solver.update(truth)
-    pseudo = solver(torch.as_tensor(truth).permute(2, 0, 1)[None])[0].permute(1, 2, 0).numpy()
-    return pseudo - truth
+    return solver(torch.as_tensor(truth).permute(2, 0, 1)[None])[0].permute(1, 2, 0).numpy()
 
 
 def compare(full, direct) -> dict:
@@ -70,8 +70,8 @@ def compare(full, direct) -> dict:
     row = {"observed_bend": angular_error(with_ir, without)[mask].mean(),
            "observed_dslant": slant_bias(with_ir, without, mask)}
     for factor in FACET_GRIDS:
-        change = predicted_change(full, factor)
-        pseudo = truth + change
+        pseudo = predicted_pseudo_normals(full, factor)
+        change = pseudo - truth
         cosine = (observed * change).sum(-1)[mask].sum() / np.sqrt(
             (observed ** 2).sum(-1)[mask].sum() * (change ** 2).sum(-1)[mask].sum())
         row[f"x{factor}"] = (angular_error(pseudo, truth)[mask].mean(), slant_bias(pseudo, truth, mask),
