@@ -51,10 +51,8 @@ def slant_bias(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray) -> float:
         pred, gt: (H, W, 3) normals of any non-zero length.
         mask: (H, W) bool.
     """
-    def slant(n):
-        n = n[mask]
-        return np.degrees(np.arccos(np.clip(n[:, 2] / np.linalg.norm(n, axis=-1), -1.0, 1.0)))
-    return float((slant(pred) - slant(gt)).mean())
+    view = np.array([0.0, 0.0, 1.0])
+    return float((angular_error(pred[mask], view) - angular_error(gt[mask], view)).mean())
 
 
 def light_direction_mae(pred: np.ndarray, gt: np.ndarray) -> float:
