@@ -258,3 +258,19 @@ def test_notebook_runs_at_tiny_size(tmp_path):
     images = [o for c in notebook.cells if c.cell_type == "code" for o in c.outputs
               if "image/png" in o.get("data", {})]
     assert len(images) >= 5
+
+
+def test_nir_benchmark_reads_one_row_per_seed_and_averages(tmp_path):
+    """Finished rows are read, not refitted: seed 0 in <row>/, seed k in <row>-seed<k>/."""
+    import importlib.util
+    path = Path(__file__).parents[1] / "experiments" / "neural_inverse_rendering" / "benchmark.py"
+    spec = importlib.util.spec_from_file_location("nir_benchmark", path)
+    benchmark = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(benchmark)
+    for folder, mae in [("ball-gt-unps-fast", 2.0), ("ball-gt-unps-fast-seed3", 3.0)]:
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / "metrics.json").write_text(json.dumps({"normal_mae": mae}))
+    fits = benchmark.unps_rows(tmp_path, "ball-gt-unps-fast", ["subject=ball"], [0, 3])
+    assert [f["normal_mae"] for f in fits] == [2.0, 3.0]
+    assert benchmark.mae(fits) == "2.50 (2.00 / 3.00)"
+    assert benchmark.mae(fits[:1]) == "2.00"

@@ -3,10 +3,14 @@
     python experiments/neural_inverse_rendering/benchmark.py [--out runs/nir] [--preset fast]
     python experiments/neural_inverse_rendering/benchmark.py --only diligent --preset paper
     python experiments/neural_inverse_rendering/benchmark.py --only diligent --objects ball --lights gt
+    python experiments/neural_inverse_rendering/benchmark.py --seeds 0 1 --set preset.input_noise_var=0.3 \
+        --out runs/nir-noise0.3
 
 Every row is one `python -m unps.fit` run in its own process, in `<out>/<row>/` (a rerun skips
 rows whose metrics.json exists, and a killed row resumes from its checkpoint); peak memory is the
-process's maximum resident set. Tables printed:
+process's maximum resident set. ``--set`` passes overrides to every unps row (keep one ``--out`` per
+setting), and ``--seeds`` fits every unps row once per seed, printing the mean and each seed's
+figure. Tables printed:
 
 - DiLiGenT (ball full resolution, cat and pot1 crops read as floor by subject=<name>; 96 images):
   unps with the shipped light network's estimate, with those lights refined (light=refine), and
@@ -57,42 +61,56 @@ def run(out: Path, *overrides: str) -> dict:
     return result
 
 
+def unps_rows(out: Path, row: str, overrides: list[str], seeds: list[int]) -> list[dict]:
+    """One unps fit per seed: ``<row>`` for seed 0, ``<row>-seed<k>`` otherwise."""
+    return [run(out / (row if seed == 0 else f"{row}-seed{seed}"), *overrides, f"seed={seed}")
+            for seed in seeds]
+
+
+def mae(results: list[dict]) -> str:
+    """Mean normal MAE over seeds, followed by each seed's when there are several."""
+    values = [r["normal_mae"] for r in results]
+    text = f"{sum(values) / len(values):.2f}"
+    return text if len(values) == 1 else f"{text} ({' / '.join(f'{v:.2f}' for v in values)})"
+
+
 def diligent_subject(name: str) -> list[str]:
     """The object by name, so that the crops are read the way they were made (quantization=auto)."""
     return [f"subject={name}", f"paths.diligent_dir={DILIGENT}"]
 
 
-def diligent(out: Path, preset: str, objects: list[str], lights: list[str]) -> None:
-    print(f"\nDiLiGenT, 96 images, preset={preset} (normal MAE °; unps time and peak memory)")
-    print(f"{'object':<6} {'light':<9} {'light °':>7} {'RPCA °':>7} {'unps °':>7} {'paper °':>7} "
-          f"{'grid':>9} {'s':>6} {'s/step':>6} {'GB':>5}")
+def diligent(out: Path, preset: str, objects: list[str], lights: list[str], extra: list[str],
+             seeds: list[int]) -> None:
+    print(f"\nDiLiGenT, 96 images, preset={preset} {' '.join(extra)} (normal MAE °; unps time and peak "
+          f"memory of the first seed)")
+    print(f"{'object':<6} {'light':<9} {'light °':>7} {'RPCA °':>7} {'paper °':>7} {'grid':>9} {'s':>6} "
+          f"{'s/step':>6} {'GB':>5}  unps °")
     for name in objects:
         subject = diligent_subject(name)
         for light in lights:
             start = "estimated" if light == "refine" else light     # the lights refinement starts from
             rpca = run(out / f"{name}-{start}-rpca", *subject, f"light={start}", "method=rpca")
-            unps = run(out / f"{name}-{light}-unps-{preset}", *subject, f"light={light}", "method=unps",
-                       f"preset={preset}")
+            fits = unps_rows(out, f"{name}-{light}-unps-{preset}",
+                             [*subject, f"light={light}", "method=unps", f"preset={preset}", *extra], seeds)
+            unps = fits[0]
             h, w = unps["fit_resolution"]
             print(f"{name:<6} {light:<9} {unps.get('light_dir_mae', 0):7.2f} {rpca['normal_mae']:7.2f} "
-                  f"{unps['normal_mae']:7.2f} {PAPER[name] if light != 'gt' else '':>7} "
-                  f"{f'{w}×{h}':>9} {unps['runtime_s']:6.0f} {unps['fit_s_per_step']:6.3f} "
-                  f"{unps['peak_rss_gb']:5.2f}", flush=True)
+                  f"{PAPER[name] if light != 'gt' else '':>7} {f'{w}×{h}':>9} {unps['runtime_s']:6.0f} "
+                  f"{unps['fit_s_per_step']:6.3f} {unps['peak_rss_gb']:5.2f}  {mae(fits)}", flush=True)
 
 
-def synthetic(out: Path, preset: str) -> None:
-    print(f"\nSynthetic subjects, ground-truth lights, preset={preset} (normal MAE °)")
-    print(f"{'subject':<10} {'Woodham':>8} {'Nayar':>8} {'unps off':>8} {'unps nayar':>10} {'s':>6}")
+def synthetic(out: Path, preset: str, extra: list[str], seeds: list[int]) -> None:
+    print(f"\nSynthetic subjects, ground-truth lights, preset={preset} {' '.join(extra)} (normal MAE °)")
+    print(f"{'subject':<10} {'Woodham':>8} {'Nayar':>8} {'s':>6}  unps off | unps nayar")
     for name in SYNTHETIC:
         common = [f"subject={name}", "light=gt"]
         woodham = run(out / f"{name}-woodham", *common, "method=woodham")
         nayar = run(out / f"{name}-nayar", *common, "method=nayar")
-        off = run(out / f"{name}-unps-{preset}-off", *common, "method=unps", f"preset={preset}",
-                  "interreflection=off")
-        on = run(out / f"{name}-unps-{preset}-nayar", *common, "method=unps", f"preset={preset}",
-                 "interreflection=nayar")
+        unps = [*common, "method=unps", f"preset={preset}", *extra]
+        off = unps_rows(out, f"{name}-unps-{preset}-off", [*unps, "interreflection=off"], seeds)
+        on = unps_rows(out, f"{name}-unps-{preset}-nayar", [*unps, "interreflection=nayar"], seeds)
         print(f"{name:<10} {woodham['normal_mae']:8.2f} {nayar['normal_mae']:8.2f} "
-              f"{off['normal_mae']:8.2f} {on['normal_mae']:10.2f} {on['runtime_s']:6.0f}", flush=True)
+              f"{on[0]['runtime_s']:6.0f}  {mae(off)} | {mae(on)}", flush=True)
 
 
 def paper_speed(out: Path, steps: int) -> None:
@@ -115,6 +133,9 @@ def main():
                         help="DiLiGenT objects (all three by default)")
     parser.add_argument("--lights", nargs="+", choices=LIGHTS, default=LIGHTS,
                         help="DiLiGenT light modes (all three by default)")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0], help="seeds of every unps row")
+    parser.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
+                        help="Hydra overrides for every unps row, e.g. preset.input_noise_var=0.3")
     args = parser.parse_args()
     device = torch.cuda.get_device_name() if torch.cuda.is_available() else "CPU"
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, {device}; "
@@ -122,9 +143,9 @@ def main():
     if args.only in (None, "diligent"):
         if not DILIGENT.is_dir():
             sys.exit(f"{DILIGENT}: DiLiGenT not found (../shared/data beside the repository)")
-        diligent(args.out, args.preset, args.objects, args.lights)
+        diligent(args.out, args.preset, args.objects, args.lights, args.set, args.seeds)
     if args.only in (None, "synthetic"):
-        synthetic(args.out, args.preset)
+        synthetic(args.out, args.preset, args.set, args.seeds)
     if args.only in (None, "speed"):
         paper_speed(args.out, args.paper_steps)
 
