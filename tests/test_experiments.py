@@ -274,3 +274,8 @@ def test_nir_benchmark_reads_one_row_per_seed_and_averages(tmp_path):
     assert [f["normal_mae"] for f in fits] == [2.0, 3.0]
     assert benchmark.mae(fits) == "2.50 (2.00 / 3.00)"
     assert benchmark.mae(fits[:1]) == "2.00"
+    (tmp_path / "ball-gt-unps-fast" / ".hydra").mkdir()
+    (tmp_path / "ball-gt-unps-fast" / ".hydra" / "overrides.yaml").write_text("- subject=ball\n- seed=0\n")
+    assert benchmark.unps_rows(tmp_path, "ball-gt-unps-fast", ["subject=ball"], [0])[0]["normal_mae"] == 2.0
+    with pytest.raises(ValueError, match=r"lacks \['preset.input_noise_var=0.3'\] and has \[\]"):
+        benchmark.unps_rows(tmp_path, "ball-gt-unps-fast", ["subject=ball", "preset.input_noise_var=0.3"], [0])

@@ -7,10 +7,10 @@
         --out runs/nir-noise0.3
 
 Every row is one `python -m unps.fit` run in its own process, in `<out>/<row>/` (a rerun skips
-rows whose metrics.json exists, and a killed row resumes from its checkpoint); peak memory is the
-process's maximum resident set. ``--set`` passes overrides to every unps row (keep one ``--out`` per
-setting), and ``--seeds`` fits every unps row once per seed, printing the mean and each seed's
-figure. Tables printed:
+rows whose metrics.json exists, and a killed row resumes from its checkpoint, after checking that
+Hydra recorded the same overrides); peak memory is the process's maximum resident set. ``--set``
+passes overrides to every unps row (keep one ``--out`` per setting), and ``--seeds`` fits every
+unps row once per seed, printing the mean and each seed's figure. Tables printed:
 
 - DiLiGenT (ball full resolution, cat and pot1 crops read as floor by subject=<name>; 96 images):
   unps with the shipped light network's estimate, with those lights refined (light=refine), and
@@ -33,6 +33,7 @@ import sys
 from pathlib import Path
 
 import torch
+from omegaconf import OmegaConf
 
 DILIGENT = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "DiLiGenT"
 OBJECTS = ("ball", "cat", "pot1")
@@ -42,8 +43,18 @@ SYNTHETIC = ["Vase", "BrokenPot", "Tablet1"]
 
 
 def run(out: Path, *overrides: str) -> dict:
-    """One `unps.fit` in a fresh process; its metrics.json plus ``peak_rss_gb``."""
+    """One `unps.fit` in a fresh process; its metrics.json plus ``peak_rss_gb``.
+
+    A finished row is read, not refitted, and a killed one resumed, only if Hydra recorded it with
+    these overrides.
+    """
     metrics = out / "metrics.json"
+    recorded = out / ".hydra" / "overrides.yaml"
+    if recorded.is_file():
+        done_with, wanted = set(OmegaConf.load(recorded)), set(overrides)
+        if done_with != wanted:
+            raise ValueError(f"{out} was run with other overrides: it lacks {sorted(wanted - done_with)} "
+                             f"and has {sorted(done_with - wanted)}; give this setting its own --out")
     if not metrics.is_file():
         code = ("import atexit, json, resource, sys, runpy\n"
                 f"atexit.register(lambda: open({str(out / 'peak_rss_kb')!r}, 'w').write("
