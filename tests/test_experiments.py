@@ -260,13 +260,24 @@ def test_notebook_runs_at_tiny_size(tmp_path):
     assert len(images) >= 5
 
 
+def load_script(name, relative):
+    import importlib.util
+    spec = importlib.util.spec_from_file_location(name, Path(__file__).parents[1] / relative)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+
+@pytest.mark.parametrize("script", sorted(str(p.relative_to(Path(__file__).parents[1]))
+                                          for p in (Path(__file__).parents[1] / "experiments").glob("*/*.py")))
+def test_experiment_scripts_import(script):
+    """Every experiment script loads against the package as it is now (its imports resolve)."""
+    load_script(Path(script).stem, script)
+
 def test_nir_benchmark_reads_one_row_per_seed_and_averages(tmp_path):
     """Finished rows are read, not refitted: seed 0 in <row>/, seed k in <row>-seed<k>/."""
-    import importlib.util
-    path = Path(__file__).parents[1] / "experiments" / "neural_inverse_rendering" / "benchmark.py"
-    spec = importlib.util.spec_from_file_location("nir_benchmark", path)
-    benchmark = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(benchmark)
+    benchmark = load_script("nir_benchmark", "experiments/neural_inverse_rendering/benchmark.py")
     for folder, mae in [("ball-gt-unps-fast", 2.0), ("ball-gt-unps-fast-seed3", 3.0)]:
         (tmp_path / folder).mkdir()
         (tmp_path / folder / "metrics.json").write_text(json.dumps({"normal_mae": mae}))
@@ -279,3 +290,35 @@ def test_nir_benchmark_reads_one_row_per_seed_and_averages(tmp_path):
     assert benchmark.unps_rows(tmp_path, "ball-gt-unps-fast", ["subject=ball"], [0])[0]["normal_mae"] == 2.0
     with pytest.raises(ValueError, match=r"lacks \['preset.input_noise_var=0.3'\] and has \[\]"):
         benchmark.unps_rows(tmp_path, "ball-gt-unps-fast", ["subject=ball", "preset.input_noise_var=0.3"], [0])
+
+
+def test_slant_script_remeasures_runs_and_their_seed_ensemble(tmp_path, capsys):
+    """Two seeds of a fit, one 2° steeper and one 2° flatter than the truth: each reads ±2°, and
+    their ensemble is the truth."""
+    from omegaconf import OmegaConf
+    slant = load_script("nir_slant", "experiments/neural_inverse_rendering/slant.py")
+    cfg = hydra_config("subject=lambertian", "subject.size=24", "subject.n_lights=8")
+    subject = render_lambertian(shape="sphere", size=24, n_lights=8, seed=cfg.seed)
+    n = subject.normals[subject.mask].astype(np.float64)
+    sin_slant = np.linalg.norm(n[:, :2], axis=1, keepdims=True)
+    tilt = n[:, :2] / np.maximum(sin_slant, 1e-12)
+    steeper = np.concatenate([n[:, 2:] * tilt, -sin_slant], 1)
+    for folder, delta in [("Sphere-unps-fast", 2.0), ("Sphere-unps-fast-seed1", -2.0)]:
+        (tmp_path / folder / ".hydra").mkdir(parents=True)
+        OmegaConf.save(cfg, tmp_path / folder / ".hydra" / "config.yaml")
+        normals = np.zeros_like(subject.normals)
+        normals[subject.mask] = np.cos(np.radians(delta)) * n + np.sin(np.radians(delta)) * steeper
+        np.save(tmp_path / folder / "normals.npy", normals)
+    (tmp_path / "unfinished").mkdir()               # no normals.npy: skipped
+    slant.main([str(p) for p in sorted(tmp_path.iterdir())] + ["--group-seeds"])
+    lines = capsys.readouterr().out.splitlines()
+    runs = [(line.split()[0], *map(float, line.split()[1:3])) for line in lines[1:3]]
+    assert runs == [("Sphere-unps-fast", pytest.approx(2.0, abs=0.01), pytest.approx(2.0, abs=1e-6)),
+                    ("Sphere-unps-fast-seed1", pytest.approx(2.0, abs=0.01), pytest.approx(-2.0, abs=1e-6))]
+    row = lines[-1].split()
+    assert row[0] == "Sphere-unps-fast" and row[4] == "2"
+    assert float(row[2]) == pytest.approx(0, abs=1e-6) and float(row[5]) == pytest.approx(0, abs=1e-4)
+    (tmp_path / "no-config").mkdir()
+    np.save(tmp_path / "no-config" / "normals.npy", subject.normals)
+    with pytest.raises(FileNotFoundError, match="config.yaml"):
+        slant.main([str(tmp_path / "no-config")])

@@ -12,14 +12,14 @@ from unps.errors import Diverged, InputError
 from unps.fit import fit
 from unps.inverse.fit import (Preset, interreflection_bend, neural_inverse_rendering, upsample_normals,
                               upsample_with_detail, working_factor)
-from unps.inverse.interreflection import Interreflection, physical_albedo
+from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet, shading, specular_map
 from unps.inverse.system import InverseRendering
 from unps.metrics import angular_error
 
 TINY = dict(name="tiny", width=16, depth=3, first_kernel=1, reflectance_width=8, steps=20,
             lr_drop_at=18, images_per_step=8, update_every=10)
-NAYAR = dict(enabled=True, downsample=2, occlusion=True)
+NAYAR = dict(enabled=True, downsample=2, occlusion=True, albedo=None)
 
 
 def config(tmp_path, *overrides):
@@ -128,15 +128,6 @@ def test_interreflection_bend_is_the_angle_between_rendered_and_fitted_normals()
     flat = np.zeros_like(normals)
     flat[..., 2] = 1
     assert interreflection_bend(flat, tilted, mask) == pytest.approx({"mean": 45.0, "max": 45.0})
-
-
-def test_physical_albedo_scales_only_when_brighter_than_white():
-    mask = np.ones((4, 4), bool)
-    dim = np.full((4, 4), 0.4)
-    np.testing.assert_array_equal(physical_albedo(dim, mask), dim)
-    bright = np.linspace(1, 5, 16).reshape(4, 4)
-    scaled = physical_albedo(bright, mask)
-    assert np.percentile(scaled, 99) == pytest.approx(1.0) and scaled.min() > 0.19
 
 
 def test_working_factor_and_upsampled_normals():

@@ -22,17 +22,43 @@ def test_normal_metrics_over_the_mask_only():
     assert m["normal_mae"] == pytest.approx(20)
     assert m["normal_median"] == pytest.approx(20)
     assert (m["acc_11_25"], m["acc_30"], m["acc_45"]) == pytest.approx((1 / 3, 2 / 3, 1))
-    assert m["slant_bias"] == pytest.approx(20)          # every tilt is away from the camera
+    assert np.isnan(m["slant_bias"])       # a surface facing the camera has no slant direction
 
 
-def test_slant_bias_is_signed_and_ignores_azimuth():
-    tilt = np.radians(30)
-    gt = np.array([[[np.sin(tilt), 0, np.cos(tilt)], [0, -np.sin(tilt), np.cos(tilt)]]])
-    flatter = np.array([[[0, 0, 1.0], [0, 0, 2.0]]])
-    turned = np.array([[[0, np.sin(tilt), np.cos(tilt)], [np.sin(tilt), 0, np.cos(tilt)]]])
+def normal(slant_deg, tilt_deg):
+    slant, tilt = np.radians(slant_deg), np.radians(tilt_deg)
+    return np.array([np.sin(slant) * np.cos(tilt), np.sin(slant) * np.sin(tilt), np.cos(slant)])
+
+
+def test_slant_bias_is_signed_and_exact_for_a_change_of_slant():
+    gt = np.array([[normal(30, 0), normal(30, 250)]])
     mask = np.ones((1, 2), bool)
-    assert slant_bias(flatter, gt, mask) == pytest.approx(-30)
-    assert slant_bias(turned, gt, mask) == pytest.approx(0, abs=1e-9)
+    assert slant_bias(np.array([[[0, 0, 1.0], [0, 0, 2.0]]]), gt, mask) == pytest.approx(-30)
+    steeper = np.array([[normal(34, 0), 3 * normal(34, 250)]])
+    assert slant_bias(steeper, gt, mask) == pytest.approx(4)
+    turned = np.array([[normal(30, 1), normal(30, 249)]])
+    assert slant_bias(turned, gt, mask) == pytest.approx(0, abs=0.01)
+
+
+def test_slant_bias_does_not_read_errors_that_point_every_way_as_steepening():
+    """Eight 3° errors around each true normal, one in every direction of its tangent plane: on
+    a surface nearly facing the camera the slants themselves grow by ~3° on average."""
+    truths, preds = [], []
+    for slant, tilt in [(0.5, 40), (40, 100)]:
+        n = normal(slant, tilt)
+        e_slant = np.array([np.cos(np.radians(slant)) * np.cos(np.radians(tilt)),
+                            np.cos(np.radians(slant)) * np.sin(np.radians(tilt)), -np.sin(np.radians(slant))])
+        e_turn = np.cross(n, e_slant)
+        for phi in np.radians(np.arange(0, 360, 45)):
+            sigma = np.radians(3)
+            truths.append(n)
+            preds.append(np.cos(sigma) * n + np.sin(sigma) * (np.cos(phi) * e_slant + np.sin(phi) * e_turn))
+    gt, pred = np.array(truths)[None], np.array(preds)[None]
+    mask = np.ones(gt.shape[:2], bool)
+    assert angular_error(pred, gt) == pytest.approx(3)
+    assert slant_bias(pred, gt, mask) == pytest.approx(0, abs=1e-9)
+    view = np.array([0, 0, 1.0])
+    assert (angular_error(pred[0, :8], view) - 0.5).mean() > 2     # what the slants themselves say
 
 
 def test_light_direction_mae():

@@ -1,10 +1,11 @@
 import numpy as np
+import pytest
 
 from unps.data.subject import Subject
 from unps.geometry import integrate_normals
 from unps.metrics import angular_error
-from unps.solvers.nayar import (interreflection_kernel, nayar, remove_interreflections,
-                                visibility)
+from unps.solvers.nayar import (interreflection_kernel, nayar, reflectance_scale,
+                                remove_interreflections, visibility)
 from unps.solvers.woodham import woodham
 
 
@@ -53,7 +54,12 @@ def test_removing_interreflections_inverts_the_forward_model():
     np.testing.assert_allclose(remove_interreflections(pseudo, k, albedo), facets, atol=1e-10)
 
 
-def test_nayar_undoes_interreflections_that_fool_woodham():
+def groove_mae(subject, estimate):
+    return angular_error(estimate.normals, subject.normals)[subject.mask].mean()
+
+
+def lit_groove(exposure=1.0):
+    """A V-groove of albedo 0.8 under 12 lights, its images with interreflections, × ``exposure``."""
     z, n, mask = groove(24, slope=1.2)
     depth = integrate_normals(n, mask)
     k = interreflection_kernel(depth, n, mask)
@@ -64,8 +70,33 @@ def test_nayar_undoes_interreflections_that_fool_woodham():
     lights = np.stack([np.sin(zenith) * np.cos(azimuth), np.sin(zenith) * np.sin(azimuth),
                        np.cos(zenith)], 1)
     images = np.zeros((12, 24, 24, 3))
-    images[:, mask] = (pseudo @ lights.T).T[..., None]
-    subject = Subject("groove", images, mask, lights, normals=n)
-    err_w = angular_error(woodham(subject, lights).normals, n)[mask].mean()
-    err_n = angular_error(nayar(subject, lights, iterations=15, downsample=1).normals, n)[mask].mean()
+    images[:, mask] = exposure * (pseudo @ lights.T).T[..., None]
+    return Subject("groove", images, mask, lights, normals=n)
+
+
+def test_nayar_undoes_interreflections_that_fool_woodham():
+    subject = lit_groove()
+    err_w = groove_mae(subject, woodham(subject, subject.light_directions))
+    err_n = groove_mae(subject, nayar(subject, subject.light_directions, iterations=15, downsample=1))
     assert err_w > 3 and err_n < 0.3 * err_w
+
+
+def test_a_dim_capture_needs_its_albedo_stated():
+    """At exposure 0.1 the albedo reads 0.08: taken as a reflectance, P is 10× too weak."""
+    subject = lit_groove(exposure=0.1)
+    err_w = groove_mae(subject, woodham(subject, subject.light_directions))
+    as_is = groove_mae(subject, nayar(subject, subject.light_directions, downsample=1))
+    stated = groove_mae(subject, nayar(subject, subject.light_directions, downsample=1, albedo=0.8))
+    assert as_is > 0.7 * err_w and stated < 0.3 * err_w
+
+
+def test_reflectance_scale_reaches_the_stated_median_or_scales_down_to_white():
+    dim = np.full(16, 0.4)
+    assert reflectance_scale(dim) == 1.0
+    bright = np.linspace(1, 5, 16)
+    assert np.percentile(bright * reflectance_scale(bright), 99) == pytest.approx(1.0)
+    varied = dim * np.linspace(0.5, 1, 16)
+    stated = varied * reflectance_scale(varied, 0.6)
+    assert np.median(stated) == pytest.approx(0.6) and stated.max() == pytest.approx(0.8, rel=0.02)
+    with pytest.raises(ValueError, match="interreflection.albedo"):
+        reflectance_scale(dim, 1.5)

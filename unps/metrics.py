@@ -39,20 +39,42 @@ def normal_metrics(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray) -> dict[s
 
 
 def slant_bias(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray) -> float:
-    """Mean over the mask of the predicted minus the true slant, in degrees.
+    """Mean signed error along the slant direction, in degrees: > 0 when the predicted normals
+    lean further from the view axis +z than the true ones (a steeper surface), < 0 when flatter.
 
-    The slant is a normal's angle to the view axis +z. A positive bias means normals tilted
-    away from the camera (a steeper surface): what a Lambertian reading gives when dim pixels
-    are darker than the model expects (truncated 8-bit levels, Fresnel-weighted diffuse
-    reflection); a negative one means a flatter surface (interreflections, reflectance maps
-    that absorb shading).
+    At each pixel the predicted normal p is projected onto the plane of the true normal n and
+    its slant direction e = ∂n/∂slant (the unit tangent at n pointing away from +z); the error
+    is the angle atan2(p·e, p·n), exactly δ when p is n steepened by δ. The difference of the
+    slants themselves would read any error on a surface facing the camera as steepening (no
+    slant is below 0), so noise alone would pass for bias; this measure is 0 on average for
+    errors that point every way. The price: a turn about the view axis by φ, which leaves the
+    slant as it is, reads as a flattening of (1 − cos φ)·sin(2·slant)/2 radians (0.1° for 5°,
+    1.2° for a 16.6° turn at a slant of 45°). Pixels whose true normal is the view axis itself
+    (slant below 0.01°) have no slant direction and are left out.
+
+    A positive bias is what a Lambertian reading gives when dim pixels are darker than the model
+    expects (truncated 8-bit levels, Fresnel-weighted diffuse reflection); a negative one,
+    interreflections or reflectance maps that absorb shading.
 
     Args:
         pred, gt: (H, W, 3) normals of any non-zero length.
         mask: (H, W) bool.
+
+    Returns:
+        The mean, or NaN when no pixel of the mask has a slant direction.
     """
-    view = np.array([0.0, 0.0, 1.0])
-    return float((angular_error(pred[mask], view) - angular_error(gt[mask], view)).mean())
+    p = np.asarray(pred, dtype=np.float64)[mask]
+    n = np.asarray(gt, dtype=np.float64)[mask]
+    p = p / np.maximum(np.linalg.norm(p, axis=-1, keepdims=True), 1e-12)
+    n = n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-12)
+    sin_slant = np.linalg.norm(n[:, :2], axis=-1)
+    keep = sin_slant > np.sin(np.radians(0.01))
+    if not keep.any():
+        return float("nan")
+    p, n, sin_slant = p[keep], n[keep], sin_slant[keep]
+    tilt = n[:, :2] / sin_slant[:, None]                             # unit, in the image plane
+    steeper = np.concatenate([n[:, 2:] * tilt, -sin_slant[:, None]], 1)
+    return float(np.degrees(np.arctan2((p * steeper).sum(-1), (p * n).sum(-1))).mean())
 
 
 def light_direction_mae(pred: np.ndarray, gt: np.ndarray) -> float:

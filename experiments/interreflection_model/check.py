@@ -8,8 +8,8 @@ and a Lambertian one of the same base colour, each with path length 5 (interrefl
 subject is) and 2 (direct light only). Then, per material:
 
 - observed: Woodham's normals (Nayar's pseudo-normals) with and without interreflections: the
-  mean angle between them and the mean change of slant (angle to the view axis; negative =
-  flatter), over the object;
+  mean angle between them and the mean change of slant (:func:`unps.metrics.slant_bias` of one
+  against the other; negative = flatter), over the object;
 - predicted: ξ_n2 (`unps.inverse.interreflection.Interreflection`, what method=unps renders
   with) applied to the ground-truth normals, with P from the robust initialisation of the
   interreflected render as in a fit, at facet grids ×4 (the default) and ×2: the same two figures,
@@ -29,8 +29,9 @@ from hydra import compose, initialize_config_module
 from omegaconf import OmegaConf
 
 from unps.data.diligent import read_diligent
-from unps.inverse.interreflection import Interreflection, physical_albedo
+from unps.inverse.interreflection import Interreflection
 from unps.metrics import angular_error, slant_bias
+from unps.solvers.nayar import reflectance_scale
 from unps.solvers.rpca import robust_init
 from unps.solvers.woodham import woodham
 from unps.synthetic.render import BASE_COLOUR
@@ -54,8 +55,9 @@ def render(name: str, spec: dict, material: dict, max_depth: int):
 def predicted_pseudo_normals(subject, downsample: int) -> np.ndarray:
     """ξ_n2's N_ny from the subject's ground-truth normals, (H, W, 3)."""
     init = robust_init(subject, subject.light_directions)
-    solver = Interreflection(subject.mask, physical_albedo(init.albedo.mean(-1), subject.mask),
-                             downsample)
+    albedo = init.albedo.mean(-1)
+    albedo = albedo * reflectance_scale(albedo[subject.mask])
+    solver = Interreflection(subject.mask, albedo, downsample)
     truth = subject.normals.astype(np.float64)
     solver.update(truth)
     return solver(torch.as_tensor(truth).permute(2, 0, 1)[None])[0].permute(1, 2, 0).numpy()

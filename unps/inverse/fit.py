@@ -30,10 +30,11 @@ from scipy.ndimage import distance_transform_edt
 
 from unps.data.subject import Subject
 from unps.errors import Diverged, InputError
-from unps.inverse.interreflection import Interreflection, physical_albedo
+from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet
 from unps.inverse.system import InverseRendering, Schedule
 from unps.metrics import angular_error
+from unps.solvers.nayar import reflectance_scale
 from unps.solvers.rpca import robust_init
 from unps.solvers.woodham import Estimate, rgb_albedo
 
@@ -202,9 +203,15 @@ def build_system(work: Subject, light_directions: np.ndarray, preset: Preset, in
 
     solver = None
     if interreflection["enabled"]:
-        solver = Interreflection(mask, physical_albedo(init.albedo.mean(-1), mask),
-                                 interreflection["downsample"], interreflection["occlusion"])
-        log.info("interreflections: %d facets (×%d)", solver.n_facets, solver.factor)
+        stated = interreflection["albedo"]
+        albedo = init.albedo.mean(-1)
+        albedo = albedo * reflectance_scale(albedo[mask], stated)
+        solver = Interreflection(mask, albedo, interreflection["downsample"],
+                                 interreflection["occlusion"])
+        log.info("interreflections: %d facets (×%d), median reflectance %.3f (%s)", solver.n_facets,
+                 solver.factor, float(solver.albedo.median()),
+                 "the robust initialisation's albedo" if stated is None
+                 else f"interreflection.albedo={stated}")
 
     normal_net = NormalNet(work.n_images, preset.width, preset.depth, preset.first_kernel)
     reflectance_net = ReflectanceNet(preset.width, preset.reflectance_width, preset.reflectance_depth)

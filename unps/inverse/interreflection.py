@@ -33,28 +33,13 @@ from unps.solvers.nayar import interreflection_kernel
 log = logging.getLogger(__name__)
 
 
-def physical_albedo(albedo: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Albedo as a reflectance in [0, 1] for P.
-
-    Captures give albedo only up to the unknown exposure (and estimated lights up to a
-    global scale), while (I − PK) needs reflectances: a surface cannot reflect more than it
-    receives. When the 99th percentile over the object exceeds 1, the albedo is scaled down
-    so that it is 1 (the brightest material taken as white). Values are scaled, never clipped.
-
-    Args:
-        albedo: (H, W) gray albedo; mask: (H, W) bool.
-    """
-    level = float(np.percentile(albedo[mask], 99))
-    return albedo / level if level > 1 else albedo
-
-
 class Interreflection:
     """The facet grid, P, and the current factorisation of (I − P K).
 
     Args:
         mask: (H, W) bool, the working grid's object pixels.
         albedo: (H, W) gray albedo ρ (robust initialisation), as a reflectance
-            (:func:`physical_albedo`).
+            (:func:`unps.solvers.nayar.reflectance_scale`).
         downsample: facet grid factor.
         occlusion: include visibility in K.
     """

@@ -89,6 +89,32 @@ def interreflection_kernel(depth: np.ndarray, normals: np.ndarray, mask: np.ndar
     return k
 
 
+def reflectance_scale(albedo: np.ndarray, stated: float | None = None) -> float:
+    """The factor that turns albedos into the reflectances P needs.
+
+    Captures give albedo only up to the unknown exposure (and estimated lights up to a
+    global scale), while (I − PK) needs reflectances: a surface cannot reflect more than it
+    receives. With ``stated``, the user's figure for the object's median diffuse reflectance,
+    the factor makes the albedo's median that (the median, as facets that interreflections
+    brighten most would sway a high percentile). Without it the albedo is taken as a reflectance
+    already (as it is for unps's renders, whose lights have unit irradiance) and only scaled
+    down when its 99th percentile exceeds 1. Albedos are scaled, never clipped.
+
+    Args:
+        albedo: (M,) gray albedos over the object.
+        stated: in (0, 1], or None.
+
+    Raises:
+        ValueError: ``stated`` outside (0, 1].
+    """
+    if stated is not None:
+        if not 0 < stated <= 1:
+            raise ValueError(f"interreflection.albedo is a reflectance in (0, 1], got {stated}")
+        return stated / float(np.median(albedo))
+    level = float(np.percentile(albedo, 99))
+    return 1 / level if level > 1 else 1.0
+
+
 def remove_interreflections(pseudo: np.ndarray, kernel: np.ndarray, albedo: np.ndarray) -> np.ndarray:
     """F = (I − P K) F_p: facets without the light they received from each other.
 
@@ -111,7 +137,7 @@ def upsample(values: np.ndarray, mask: np.ndarray, shape: tuple[int, int], facto
 
 
 def nayar(subject: Subject, light_directions: np.ndarray, iterations: int = 15,
-          downsample: int = 4, occlusion: bool = True) -> Estimate:
+          downsample: int = 4, occlusion: bool = True, albedo: float | None = None) -> Estimate:
     """Nayar's shape from interreflections, as the paper's baseline (supplementary §5).
 
     Woodham's least squares gives the pseudo facets F_p (scaled normals ρ_p·n_p). On a facet
@@ -126,6 +152,9 @@ def nayar(subject: Subject, light_directions: np.ndarray, iterations: int = 15,
         iterations: Nayar's iterations (15 in the paper's comparison).
         downsample: facet grid factor (the interreflection kernel is O(m²) in facets).
         occlusion: include visibility in K.
+        albedo: the object's median diffuse reflectance: each iteration scales the current
+            albedo to it for P (:func:`reflectance_scale`; None: the albedo is a reflectance
+            already).
     """
     mask = subject.mask
     pixels = subject.images[:, mask]
@@ -136,10 +165,11 @@ def nayar(subject: Subject, light_directions: np.ndarray, iterations: int = 15,
     current = pseudo_f
     log.info("nayar: %d facets at ×%d, %d iterations", facets.sum(), downsample, iterations)
     for _ in range(iterations):
-        normals, albedo = normals_from_scaled(current)
+        normals, facet_albedo = normals_from_scaled(current)
         depth = integrate_normals(to_maps(normals, facets), facets)
         kernel = interreflection_kernel(depth, to_maps(normals, facets), facets, occlusion)
-        current = remove_interreflections(pseudo_f, kernel, albedo)
+        reflectance = facet_albedo * reflectance_scale(facet_albedo, albedo)
+        current = remove_interreflections(pseudo_f, kernel, reflectance)
     correction = upsample(to_maps(pseudo_f - current, facets).astype(np.float64), facets,
                           mask.shape, downsample)
     corrected = pseudo_full - correction
