@@ -97,8 +97,9 @@ def reflectance_scale(albedo: np.ndarray, stated: float | None = None) -> float:
     receives. With ``stated``, the user's figure for the object's median diffuse reflectance,
     the factor makes the albedo's median that (the median, as facets that interreflections
     brighten most would sway a high percentile). Without it the albedo is taken as a reflectance
-    already (as it is for unps's renders, whose lights have unit irradiance) and only scaled
-    down when its 99th percentile exceeds 1. Albedos are scaled, never clipped.
+    already (as it is on unps's renders divided by their true light intensities, not with
+    estimated ones, which are relative) and only scaled down when its 99th percentile exceeds 1.
+    Albedos are scaled, never clipped.
 
     Args:
         albedo: (M,) gray albedos over the object.
