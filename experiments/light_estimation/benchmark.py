@@ -1,10 +1,14 @@
 """The light network: real DiLiGenT, held-out synthetic renders per BRDF family, and speed.
 
     python experiments/light_estimation/benchmark.py [--checkpoint PATH] [--data ../shared/data]
+    python experiments/light_estimation/benchmark.py --only diligent --renders Face Tablet1 Vase
 
 1. DiLiGenT (ball 16-bit, cat and pot1 crops, all 96 images): direction MAE and scale-invariant
-   intensity error of the estimated lights; normal MAE of the robust initialisation with the
-   estimated lights next to the ground-truth ones.
+   intensity error of the lights as the network gives them, the direction MAE once aligned to
+   the occluding contour (``light.align=contour``, the default of ``light=estimated``), and the
+   normal MAE of the robust initialisation with the network's, the aligned and the
+   ground-truth lights.
+   With ``--renders Face Tablet1 …``, the same directions for unps's own rendered subjects.
 2. Held-out synthetic stacks (seeds never used in training) of the checkpoint's own recipe, per
    BRDF family: analytic always, MERL neural fits when ``<data>/merl_nbrdf`` exists, MERL tables
    with ``--merl-dir``.
@@ -29,6 +33,7 @@ from unps.lightnet.estimate import estimate_lights
 from unps.lightnet.synthesis import LightDataset, MaterialBank
 from unps.lightnet.system import SHIPPED, batch_light_errors, build_net, load_lightnet
 from unps.metrics import normal_metrics
+from unps.solvers.contour import align_to_contour
 from unps.solvers.rpca import robust_init
 
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
@@ -37,20 +42,39 @@ OBJECTS = ("ball", "cat", "pot1")
 
 def diligent(data: Path, checkpoint, quantization: str = "auto"):
     """``quantization``: ``auto`` reads the 8-bit crops as ``floor``, the way they were made."""
-    print("DiLiGenT, all 96 images        dir MAE   int err   RPCA(est) °  RPCA(GT) °")
+    print("DiLiGenT, all 96 images        dir MAE   int err   aligned dir MAE   RPCA(est) °  "
+          "RPCA(aligned) °  RPCA(GT) °")
     for name in OBJECTS:
         try:
             subject = read_diligent_object(data / "DiLiGenT", name, quantization=quantization)
         except InputError as e:
             print(f"{name:<6} skipped: {e}")
             continue
-        lights = estimate_lights(subject, checkpoint)
+        lights = estimate_lights(subject, checkpoint, align=None)
+        aligned = align_to_contour(subject, lights)
         errors = light_errors(lights, subject)
         est = robust_init(with_lights(subject, lights), lights.directions)
+        est_aligned = robust_init(with_lights(subject, aligned), aligned.directions)
         gt = robust_init(subject, subject.light_directions)
         mae = lambda e: normal_metrics(e.normals, subject.normals, subject.mask)["normal_mae"]  # noqa: E731
         print(f"{name:<30} {errors['light_dir_mae']:>7.2f}° {errors['light_int_err']:>9.3f} "
-              f"{mae(est):>12.2f} {mae(gt):>11.2f}", flush=True)
+              f"{light_errors(aligned, subject)['light_dir_mae']:>16.2f}° {mae(est):>12.2f} "
+              f"{mae(est_aligned):>16.2f} {mae(gt):>11.2f}", flush=True)
+
+
+def renders(names: list[str], checkpoint):
+    """Direction MAE as the network gives it and aligned, on unps's rendered subjects (cached)."""
+    from hydra import compose, initialize_config_module
+    from hydra.utils import instantiate
+
+    print("rendered subject               dir MAE   aligned dir MAE")
+    with initialize_config_module("unps.conf", version_base=None):
+        for name in names:
+            subject = instantiate(compose("fit", overrides=[f"subject={name}"]).subject, _partial_=True)()
+            lights = estimate_lights(subject, checkpoint, align=None)
+            aligned = align_to_contour(subject, lights)
+            print(f"{name:<30} {light_errors(lights, subject)['light_dir_mae']:>7.2f}° "
+                  f"{light_errors(aligned, subject)['light_dir_mae']:>16.2f}°", flush=True)
 
 
 @torch.no_grad()
@@ -106,6 +130,9 @@ def main():
     parser.add_argument("--samples", type=int, default=64)
     parser.add_argument("--quantization", choices=["auto", "round"], default="auto",
                         help="how to read DiLiGenT (round: the crops as read before unps read them as made)")
+    parser.add_argument("--only", choices=["diligent", "synthetic", "speed"], help="one part only")
+    parser.add_argument("--renders", nargs="*", default=[], metavar="SUBJECT",
+                        help="rendered subjects to add to the DiLiGenT part, e.g. Face Tablet1")
     args = parser.parse_args()
 
     net, config = load_lightnet(args.checkpoint)
@@ -114,14 +141,23 @@ def main():
           f"{OmegaConf.to_yaml(OmegaConf.create(config['recipe'])).strip().replace(chr(10), ', ')}")
     if notes:
         print(f"trained: {notes}")
-    diligent(args.data, args.checkpoint, args.quantization)
-    families = {"analytic": MaterialBank()}
-    if (args.data / "merl_nbrdf").is_dir():
-        families["neural"] = MaterialBank(analytic=0, neural_dir=str(args.data / "merl_nbrdf"), neural=1)
-    if args.merl_dir:
-        families["merl"] = MaterialBank(analytic=0, merl_dir=str(args.merl_dir), merl=1)
-    synthetic(net, config, families, args.samples)
-    speed(config)
+    if args.only in (None, "diligent"):
+        diligent(args.data, args.checkpoint, args.quantization)
+        renders(args.renders, args.checkpoint)
+    if args.only in (None, "synthetic"):
+        synthetic(net, config, families(args.data, args.merl_dir), args.samples)
+    if args.only in (None, "speed"):
+        speed(config)
+
+
+def families(data: Path, merl_dir: Path | None) -> dict:
+    """The BRDF families to hold out: analytic, and the MERL ones whose data is present."""
+    banks = {"analytic": MaterialBank()}
+    if (data / "merl_nbrdf").is_dir():
+        banks["neural"] = MaterialBank(analytic=0, neural_dir=str(data / "merl_nbrdf"), neural=1)
+    if merl_dir:
+        banks["merl"] = MaterialBank(analytic=0, merl_dir=str(merl_dir), merl=1)
+    return banks
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ from unps.data.subject import Subject
 from unps.lightnet.bins import decode_lights
 from unps.lightnet.system import load_lightnet
 from unps.lights import Lights
+from unps.solvers.contour import align_to_contour
 
 log = logging.getLogger(__name__)
 
@@ -47,19 +48,27 @@ def network_input(images: np.ndarray, mask: np.ndarray, resolution: int
 
 
 @torch.no_grad()
-def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode: bool = True
-                    ) -> Lights:
+def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode: bool = True,
+                    align: str | None = "contour") -> Lights:
     """Directions and relative intensities of every image, from the captured images alone.
 
     Args:
         subject: its captured images (``observed_images()``) are used; known lights are not.
         checkpoint: weights to use; default: the weights shipped with unps.
         soft_decode: soft-arg-max decoding of the bins (else arg-max).
+        align: ``"contour"`` rotates the network's directions so that the occluding contour's
+            normals face sideways (:func:`unps.solvers.contour.align_to_contour`; beyond the
+            paper), None keeps them as the network gave them.
+
+    Raises:
+        ValueError: another ``align``.
 
     Returns:
         Lights with (n, 3) unit directions and (n, 3) intensities (one value per image,
         repeated for RGB; mean 1 over the images).
     """
+    if align not in (None, "contour"):
+        raise ValueError(f"light.align must be contour or null, got {align!r}")
     net, config = load_lightnet(checkpoint)
     resolution = config["recipe"]["resolution"]
     images, mask = network_input(subject.observed_images(), subject.mask, resolution)
@@ -68,5 +77,6 @@ def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode
                                             logits["intensity"], soft_decode)
     intensities = intensities[0] / intensities[0].mean()
     log.info("estimated %d lights with %s", subject.n_images, checkpoint or "the shipped weights")
-    return Lights(directions[0].numpy().astype(np.float32),
-                  intensities[:, None].repeat(1, 3).numpy().astype(np.float32), "estimated")
+    lights = Lights(directions[0].numpy().astype(np.float32),
+                    intensities[:, None].repeat(1, 3).numpy().astype(np.float32), "estimated")
+    return align_to_contour(subject, lights) if align == "contour" else lights

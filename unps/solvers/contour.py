@@ -1,0 +1,115 @@
+"""The occluding contour fixes the rotation that estimated lights leave free.
+
+Rotating every light and every normal by the same R leaves Lambertian shading n·l unchanged, so
+the images alone cannot tell lights rotated by R from the true ones, and a light network's
+global rotation error passes straight into the normals. On the object's outline, though, the
+surface turns away from the camera: the true normals there are perpendicular to the view axis
+and point outward, across the outline. :func:`contour_rotation` finds the R that best turns
+the normals estimated with the lights onto those directions (Kabsch), and
+:func:`align_to_contour` applies it to the lights.
+
+Frame: x right (+col), y up (−row), z toward the camera.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+from scipy.ndimage import binary_erosion, gaussian_filter
+
+from unps.data.subject import Subject
+from unps.lights import Lights
+from unps.metrics import angular_error
+from unps.solvers.rpca import robust_init
+
+log = logging.getLogger(__name__)
+
+MIN_CONTOUR_PIXELS = 50
+MAX_CONTOUR_MISFIT = 45.0   # degrees: median angle left on the contour after the best rotation
+
+
+def outward_normals(mask: np.ndarray, band: int = 2, smoothing: float = 2.0
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """The occluding contour's pixels and the normals a smooth surface has there.
+
+    Args:
+        mask: (H, W) bool object mask.
+        band: width in pixels of the contour band inside the mask.
+        smoothing: σ in pixels of the Gaussian that gives the outline's direction.
+
+    Returns:
+        (H, W) bool, the band's pixels, leaving out those within ``band`` of the image border
+        (an object cut by the frame has no contour there); (H, W, 3) unit normals
+        (outward direction in the image plane, z = 0).
+    """
+    band_pixels = mask & ~binary_erosion(mask, iterations=band, border_value=1)
+    inner = np.zeros_like(mask)
+    inner[band:-band, band:-band] = True
+    gy, gx = np.gradient(gaussian_filter(mask.astype(np.float64), smoothing))   # rows down
+    outward = np.stack([-gx, gy, np.zeros_like(gx)], -1)
+    length = np.linalg.norm(outward, axis=-1)
+    outward /= np.maximum(length, 1e-12)[..., None]
+    return band_pixels & inner & (length > 1e-6), outward
+
+
+def contour_rotation(normals: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray | None, str]:
+    """The rotation R that best turns the contour's estimated normals onto the outward ones.
+
+    Args:
+        normals: (H, W, 3) unit normals estimated with the lights to correct.
+        mask: (H, W) bool.
+
+    Returns:
+        (3, 3) proper rotation maximising Σ tᵢ·(R nᵢ) over the contour, and what it rests on; or
+        None and why not: the contour has fewer than ``MIN_CONTOUR_PIXELS`` pixels, or even
+        rotated the normals there stay more than ``MAX_CONTOUR_MISFIT`` from facing sideways
+        (median), so the outline is not an occluding contour (a rim, a break) or the normals
+        are too wrong to say.
+    """
+    contour, outward = outward_normals(mask)
+    count = int(contour.sum())
+    if count < MIN_CONTOUR_PIXELS:
+        return None, f"{count} pixels of occluding contour off the image border, fewer than " \
+                     f"{MIN_CONTOUR_PIXELS}"
+    estimated = normals[contour].astype(np.float64)
+    u, _, vt = np.linalg.svd(outward[contour].T @ estimated)                    # Σ t nᵀ
+    rotation = u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
+    misfit = float(np.median(angular_error(estimated @ rotation.T, outward[contour])))
+    if misfit > MAX_CONTOUR_MISFIT:
+        return None, f"the outline's normals stay {misfit:.1f}° (median) from facing sideways " \
+                     f"after the best rotation, more than {MAX_CONTOUR_MISFIT:.0f}°"
+    return rotation, f"{count} contour pixels, median misfit {misfit:.1f}°"
+
+
+def rotation_angle(rotation: np.ndarray) -> float:
+    """Degrees a (3, 3) rotation turns by."""
+    return float(np.degrees(np.arccos(np.clip((np.trace(rotation) - 1) / 2, -1, 1))))
+
+
+def align_to_contour(subject: Subject, lights: Lights) -> Lights:
+    """Estimated lights rotated so that the robust initialisation's normals with them face
+    outward on the occluding contour.
+
+    Args:
+        subject: its captured images and mask.
+        lights: estimated directions and intensities.
+
+    Returns:
+        The lights with every direction rotated by :func:`contour_rotation` (intensities
+        unchanged), or as given when that finds no rotation it can trust.
+    """
+    observed = subject.observed_images()
+    divided = observed / lights.intensities[:, None, None, :] if lights.intensities is not None \
+        else observed
+    work = Subject(subject.name, divided.astype(np.float32), subject.mask, lights.directions)
+    normals = robust_init(work, lights.directions).normals
+    rotation, basis = contour_rotation(normals, subject.mask)
+    if rotation is None:
+        log.warning("subject %r: %s; the estimated lights are used as they are", subject.name, basis)
+        return lights
+    directions = (lights.directions.astype(np.float64) @ rotation.T).astype(np.float32)
+    log.info("aligned the estimated lights to the occluding contour: a rotation of %.2f° "
+             "(lights moved by %.2f° on average; %s)", rotation_angle(rotation),
+             float(angular_error(directions, lights.directions).mean()), basis)
+    return Lights(directions, lights.intensities, lights.source)
