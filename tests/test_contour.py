@@ -65,3 +65,11 @@ def test_estimate_lights_refuses_an_unknown_alignment():
     from unps.lightnet.estimate import estimate_lights
     with pytest.raises(ValueError, match="light.align"):
         estimate_lights(render_lambertian(size=16, n_lights=4), align="boundary")
+
+
+def test_align_to_contour_keeps_lights_that_are_off_by_less_than_it_can_tell():
+    sphere = render_lambertian("sphere", size=64, n_lights=16)
+    turn = Rotation.from_euler("z", 2, degrees=True).as_matrix()
+    estimate = Lights((sphere.light_directions @ turn.T).astype(np.float32), sphere.light_intensities,
+                      "estimated")
+    np.testing.assert_array_equal(align_to_contour(sphere, estimate).directions, estimate.directions)
