@@ -292,7 +292,7 @@ def test_nir_benchmark_reads_one_row_per_seed_and_averages(tmp_path):
         benchmark.unps_rows(tmp_path, "ball-gt-unps-fast", ["subject=ball", "preset.input_noise_var=0.3"], [0])
 
 
-def test_slant_script_remeasures_runs_and_their_seed_ensemble(tmp_path, capsys):
+def test_slant_script_remeasures_runs_and_their_seed_ensemble(tmp_path, capsys, monkeypatch):
     """Two seeds of a fit, one 2° steeper and one 2° flatter than the truth: each reads ±2°, and
     their ensemble is the truth."""
     from omegaconf import OmegaConf
@@ -322,3 +322,9 @@ def test_slant_script_remeasures_runs_and_their_seed_ensemble(tmp_path, capsys):
     np.save(tmp_path / "no-config" / "normals.npy", subject.normals)
     with pytest.raises(FileNotFoundError, match="config.yaml"):
         slant.main([str(tmp_path / "no-config")])
+    np.save(tmp_path / "Sphere-unps-fast" / "normals.npy", subject.normals[:-1])
+    with pytest.raises(ValueError, match=r"normals.npy: shape \(23, 24, 3\), expected the subject's \(24, 24, 3\)"):
+        slant.main([str(tmp_path / "Sphere-unps-fast")])
+    monkeypatch.setattr(slant, "instantiate", lambda *args, **kwargs: lambda: subject.replace(normals=None))
+    with pytest.raises(ValueError, match="has no ground-truth normals"):
+        slant.truth(tmp_path / "Sphere-unps-fast", {})

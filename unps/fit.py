@@ -28,7 +28,7 @@ from unps.allocator import keep_freed_memory
 from unps.data.subject import Subject, add_noise
 from unps.errors import InputError, exit_on_bad_input
 from unps.geometry import integrate_normals
-from unps.lights import Lights, ground_truth
+from unps.lights import Lights, ground_truth, with_lights
 from unps.metrics import angular_error, light_direction_mae, light_intensity_error, normal_metrics
 
 log = logging.getLogger("unps.fit")
@@ -127,16 +127,6 @@ def light_errors(lights: Lights, subject: Subject) -> dict[str, float]:
         log.info("estimated lights: direction error %.2f°, intensity error %.3f",
                  out.get("light_dir_mae", float("nan")), out.get("light_int_err", float("nan")))
     return out
-
-
-def with_lights(subject: Subject, lights: Lights) -> Subject:
-    """The subject as the method must see it with these lights: captured images divided by
-    their intensities, and the lights in place of any known ones."""
-    observed = subject.observed_images()
-    intensities = lights.intensities
-    images = observed / intensities[:, None, None, :] if intensities is not None else observed
-    return subject.replace(images=images, light_directions=lights.directions,
-                           light_intensities=intensities)
 
 
 @hydra.main(version_base="1.3", config_path="pkg://unps.conf", config_name="fit")

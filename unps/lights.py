@@ -35,6 +35,16 @@ def ground_truth(subject: Subject) -> Lights:
     return Lights(subject.light_directions, subject.light_intensities, "gt")
 
 
+def with_lights(subject: Subject, lights: Lights) -> Subject:
+    """The subject as the method must see it with these lights: captured images divided by
+    their intensities, and the lights in place of any known ones."""
+    observed = subject.observed_images()
+    intensities = lights.intensities
+    images = observed / intensities[:, None, None, :] if intensities is not None else observed
+    return subject.replace(images=images, light_directions=lights.directions,
+                           light_intensities=intensities)
+
+
 def write_lights(path, lights: Lights) -> None:
     """Write lights as text, one image per row: ``lx ly lz e_r e_g e_b``, atomically."""
     intensities = lights.intensities

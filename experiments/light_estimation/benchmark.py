@@ -27,7 +27,8 @@ from omegaconf import OmegaConf
 
 from unps.data.diligent import read_diligent_object
 from unps.errors import InputError
-from unps.fit import light_errors, with_lights
+from unps.fit import light_errors
+from unps.lights import with_lights
 from unps.lightnet.bins import decode_lights, encode_lights
 from unps.lightnet.estimate import estimate_lights
 from unps.lightnet.synthesis import LightDataset, MaterialBank

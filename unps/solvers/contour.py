@@ -19,7 +19,7 @@ import numpy as np
 from scipy.ndimage import binary_erosion, gaussian_filter
 
 from unps.data.subject import Subject
-from unps.lights import Lights
+from unps.lights import Lights, with_lights
 from unps.metrics import angular_error
 from unps.solvers.rpca import robust_init
 
@@ -104,11 +104,7 @@ def align_to_contour(subject: Subject, lights: Lights) -> Lights:
         are as likely to be its error as the network's. Measured on the Face, the rotation of
         2.9° it asks for costs the fit 0.3–0.6°.
     """
-    observed = subject.observed_images()
-    divided = observed / lights.intensities[:, None, None, :] if lights.intensities is not None \
-        else observed
-    work = Subject(subject.name, divided.astype(np.float32), subject.mask, lights.directions)
-    normals = robust_init(work, lights.directions).normals
+    normals = robust_init(with_lights(subject, lights), lights.directions).normals
     rotation, basis = contour_rotation(normals, subject.mask)
     if rotation is None:
         log.warning("subject %r: %s; the estimated lights are used as they are", subject.name, basis)
