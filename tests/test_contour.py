@@ -1,4 +1,4 @@
-"""The occluding-contour alignment of estimated lights (unps.solvers.contour)."""
+"""The occluding-contour alignment of estimated lights (unps.lights.contour)."""
 
 import numpy as np
 import pytest
@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 from unps.data.analytic import render_lambertian
 from unps.lights import Lights
 from unps.metrics import angular_error
-from unps.solvers.contour import align_to_contour, contour_rotation, outward_normals, rotation_angle
+from unps.lights.contour import align_to_contour, contour_rotation, outward_normals, rotation_angle
 
 
 def disc(size=48, radius=18.0, centre=(24, 24)):

@@ -133,7 +133,7 @@ def test_noise_is_relative_to_the_99th_percentile_and_seeded():
 
 
 def test_fit_on_a_synthetic_subject_with_noise(tmp_path):
-    cfg = subject_config("Vase", tmp_path / "cache", "method=woodham", "noise=0.05")
+    cfg = subject_config("Vase", tmp_path / "cache", "method=woodham", "light=estimated", "noise=0.05")
     cfg.paths.output_dir = str(tmp_path / "run")
     metrics = fit(cfg)
     saved = json.loads((tmp_path / "run" / "metrics.json").read_text())

@@ -25,11 +25,11 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from unps.allocator import keep_freed_memory
-from unps.data.subject import Subject, add_noise
+from unps.data.subject import add_noise
 from unps.errors import InputError, exit_on_bad_input
 from unps.geometry import integrate_normals
-from unps.lights import Lights, ground_truth, with_lights
-from unps.metrics import angular_error, light_direction_mae, light_intensity_error, normal_metrics
+from unps.lights import Lights, ground_truth, light_errors, with_lights
+from unps.metrics import angular_error, normal_metrics
 
 log = logging.getLogger("unps.fit")
 
@@ -94,6 +94,8 @@ def fit(cfg: DictConfig) -> dict:
                        else np.ones_like(lights.directions)) * rendering.light_scales[:, None]
         lights = Lights(rendering.light_directions, intensities.astype(np.float32), "refined")
         light_metrics = light_errors(lights, original)
+        if light_metrics:
+            log.info("refined lights: %s", ", ".join(f"{k} {v:.3f}" for k, v in light_metrics.items()))
 
     metrics = {"study": cfg.get("study"), "seed": cfg.seed,
                "subject": subject.name, "method": method_name, "light": light_name,
@@ -112,21 +114,6 @@ def fit(cfg: DictConfig) -> dict:
     true_lights = ground_truth(original) if lights.source != "gt" and original.calibrated else None
     write_fit_outputs(out, subject, estimate, depth, lights, metrics, error, true_lights)
     return metrics
-
-
-def light_errors(lights: Lights, subject: Subject) -> dict[str, float]:
-    """``light_dir_mae`` (degrees) and ``light_int_err`` (scale-invariant, on the mean of RGB)
-    of estimated lights against the subject's own, where it has them."""
-    out = {}
-    if subject.light_directions is not None:
-        out["light_dir_mae"] = light_direction_mae(lights.directions, subject.light_directions)
-    if subject.light_intensities is not None and lights.intensities is not None:
-        out["light_int_err"] = light_intensity_error(lights.intensities.mean(1),
-                                                     subject.light_intensities.mean(1))
-    if out:
-        log.info("estimated lights: direction error %.2f°, intensity error %.3f",
-                 out.get("light_dir_mae", float("nan")), out.get("light_int_err", float("nan")))
-    return out
 
 
 @hydra.main(version_base="1.3", config_path="pkg://unps.conf", config_name="fit")

@@ -27,14 +27,14 @@ from omegaconf import OmegaConf
 
 from unps.data.diligent import read_diligent_object
 from unps.errors import InputError
-from unps.fit import light_errors
+from unps.lights import light_errors
 from unps.lights import with_lights
 from unps.lightnet.bins import decode_lights, encode_lights
 from unps.lightnet.estimate import estimate_lights
 from unps.lightnet.synthesis import LightDataset, MaterialBank
 from unps.lightnet.system import SHIPPED, batch_light_errors, build_net, load_lightnet
 from unps.metrics import normal_metrics
-from unps.solvers.contour import align_to_contour
+from unps.lights.contour import align_to_contour
 from unps.solvers.rpca import robust_init
 
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"

@@ -13,7 +13,8 @@ passes overrides to every unps row (keep one ``--out`` per setting), and ``--see
 unps row once per seed, printing the mean and each seed's figure. Tables printed:
 
 - DiLiGenT (ball full resolution, cat and pot1 crops read as floor by subject=<name>; 96 images):
-  unps with the shipped light network's estimate, with those lights refined (light=refine), and
+  unps with the shipped light network's estimate, self-calibrated (light=selfcal), refined
+  with the surface (light=refine), and
   with the ground-truth lights, next to the robust initialisation with the same (starting)
   lights and the paper's published uncalibrated figures; "light °" is the direction error of
   the lights unps used;
@@ -38,7 +39,7 @@ from omegaconf import OmegaConf
 DILIGENT = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "DiLiGenT"
 OBJECTS = ("ball", "cat", "pot1")
 PAPER = {"ball": 3.78, "cat": 7.91, "pot1": 8.75}       # the paper's uncalibrated MAE (°)
-LIGHTS = ["estimated", "refine", "gt"]
+LIGHTS = ["estimated", "selfcal", "refine", "gt"]
 SYNTHETIC = ["Vase", "BrokenPot", "Tablet1"]
 
 

@@ -12,7 +12,7 @@ from unps.geometry import depth_to_mesh
 from unps.io.files import atomic_path, write_json, write_npy
 from unps.io.images import write_png8
 from unps.io.mesh import write_ply
-from unps.io.pictures import albedo_rgb, error_figure_png, error_rgb, normal_rgb
+from unps.io.pictures import albedo_rgb, error_figure_png, error_rgb, lights_figure_png, normal_rgb
 from unps.lights import Lights, write_lights
 from unps.solvers.woodham import Estimate
 
@@ -24,6 +24,7 @@ def write_fit_outputs(out: Path, subject: Subject, estimate: Estimate, depth: np
                       true_lights: Lights | None = None) -> None:
     """Write normals, albedo, depth, mesh, error map, lights, TensorBoard and metrics.json.
 
+    ``lights.png`` shows the lights used, against the true ones when those are known.
     With ground truth, ``normals_gt.png`` and ``error.npy`` (float16 degrees) are written too,
     and ``lights_gt.txt`` when the lights used were not the true ones: the report's
     qualitative grids and light plots read them.
@@ -50,6 +51,7 @@ def write_fit_outputs(out: Path, subject: Subject, estimate: Estimate, depth: np
     write_lights(out / "lights.txt", lights)
     if true_lights is not None:
         write_lights(out / "lights_gt.txt", true_lights)
+    write_lights_picture(out / "lights.png", lights, metrics, true_lights)
     if subject.normals is not None:
         write_png8(out / "normals_gt.png", normal_rgb(subject.normals, mask))
     if estimate.rendering is not None:
@@ -64,6 +66,18 @@ def write_fit_outputs(out: Path, subject: Subject, estimate: Estimate, depth: np
     write_json(out / "metrics.json", {**metrics, "albedo_png_scale": albedo_scale,
                                       "frame": subject.frame.to_dict()})
     log.info("outputs written to %s", out)
+
+
+def write_lights_picture(path: Path, lights: Lights, metrics: dict,
+                         true_lights: Lights | None) -> None:
+    """``lights.png``: where each image's light is, and its error when the true lights are known."""
+    title = f"{metrics['subject']}: {len(lights.directions)} lights ({lights.source})"
+    if "light_dir_mae" in metrics:
+        title += f", direction error {metrics['light_dir_mae']:.2f}° on average"
+    intensities = None if lights.intensities is None else lights.intensities.mean(1)
+    truth = None if true_lights is None else true_lights.directions
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(lights_figure_png(lights.directions, intensities, title, truth))
 
 
 def write_rendering(out: Path, rendering) -> None:

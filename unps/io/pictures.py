@@ -56,3 +56,58 @@ def error_figure_png(error_deg: np.ndarray, mask: np.ndarray, title: str,
     fig.savefig(buffer, format="png", bbox_inches="tight")
     plt.close(fig)
     return buffer.getvalue()
+
+
+def lights_figure_png(directions: np.ndarray, intensities: np.ndarray | None, title: str,
+                      true_directions: np.ndarray | None = None) -> bytes:
+    """A PNG of every image's light: seen from the camera, the unit hemisphere's (l_x, l_y) with
+    one numbered dot per image coloured by its intensity; beside it each image's intensity, and,
+    when the true lights are known, each light's direction error with a line to its true place.
+
+    Args:
+        directions: (n, 3) unit, unps frame (x right, y up, z toward the camera).
+        intensities: (n,) relative intensities, or None when unknown.
+        true_directions: (n, 3) unit, the calibrated lights.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = len(directions)
+    fig, (sky, bars) = plt.subplots(1, 2, figsize=(11, 4.6), dpi=130,
+                                    gridspec_kw={"width_ratios": [1, 1.3], "wspace": 0.45})
+    sky.add_patch(plt.Circle((0, 0), 1, fill=False, color="0.6"))
+    for elevation in (30, 60):
+        sky.add_patch(plt.Circle((0, 0), np.cos(np.radians(elevation)), fill=False, color="0.85", ls=":"))
+    colours = intensities if intensities is not None else np.ones(n)
+    if true_directions is not None:
+        for est, true in zip(directions, true_directions):
+            sky.plot([est[0], true[0]], [est[1], true[1]], color="tab:red", lw=0.7)
+        sky.scatter(true_directions[:, 0], true_directions[:, 1], s=22, facecolors="none",
+                    edgecolors="tab:green", label="ground truth")
+    dots = sky.scatter(directions[:, 0], directions[:, 1], c=colours, cmap="plasma", s=14, zorder=3,
+                       label="lights used")
+    for i, d in enumerate(directions):
+        sky.annotate(str(i + 1), d[:2], fontsize=5, xytext=(2, 2), textcoords="offset points")
+    sky.set(xlim=(-1.05, 1.05), ylim=(-1.05, 1.05), aspect="equal", xlabel="l_x (right)",
+            ylabel="l_y (up)", title="seen from the camera (rings: elevation 0°, 30°, 60°)")
+    sky.title.set_fontsize(9)
+    sky.legend(loc="lower left", fontsize=7)
+    if intensities is not None:
+        fig.colorbar(dots, ax=sky, fraction=0.046, pad=0.04).set_label("intensity")
+    index = np.arange(1, n + 1)
+    if true_directions is not None:
+        cosine = np.clip(np.sum(directions * true_directions, axis=1), -1, 1)
+        bars.bar(index, np.degrees(np.arccos(cosine)), color="tab:red")
+        bars.set_ylabel("direction error (°)")
+    elif intensities is not None:
+        bars.bar(index, intensities, color="tab:orange")
+        bars.set_ylabel("intensity")
+    bars.set_xlabel("image")
+    bars.grid(alpha=0.3)
+    fig.suptitle(title, fontsize=10)
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", bbox_inches="tight")
+    plt.close(fig)
+    return buffer.getvalue()

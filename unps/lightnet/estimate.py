@@ -11,8 +11,9 @@ import torch.nn.functional as F
 from unps.data.subject import Subject
 from unps.lightnet.bins import decode_lights
 from unps.lightnet.system import load_lightnet
-from unps.lights import Lights
-from unps.solvers.contour import align_to_contour
+from unps.lights import Lights, light_errors
+from unps.lights.contour import align_to_contour
+from unps.lights.selfcal import SelfCalibration, self_calibrate
 
 log = logging.getLogger(__name__)
 
@@ -47,9 +48,9 @@ def network_input(images: np.ndarray, mask: np.ndarray, resolution: int
     return x[None], (m > 0.5).float()
 
 
-@torch.no_grad()
 def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode: bool = True,
-                    align: str | None = "contour") -> Lights:
+                    align: str | None = "contour", selfcal: SelfCalibration | None = None
+                    ) -> Lights:
     """Directions and relative intensities of every image, from the captured images alone.
 
     Args:
@@ -57,8 +58,10 @@ def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode
         checkpoint: weights to use; default: the weights shipped with unps.
         soft_decode: soft-arg-max decoding of the bins (else arg-max).
         align: ``"contour"`` rotates the network's directions so that the occluding contour's
-            normals face sideways (:func:`unps.solvers.contour.align_to_contour`; beyond the
+            normals face sideways (:func:`unps.lights.contour.align_to_contour`; beyond the
             paper), None keeps them as the network gave them.
+        selfcal: settings of the self-calibration that then fits the lights to the images
+            (:func:`unps.lights.selfcal.self_calibrate`; beyond the paper), None skips it.
 
     Raises:
         ValueError: another ``align``.
@@ -69,6 +72,20 @@ def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode
     """
     if align not in (None, "contour"):
         raise ValueError(f"light.align must be contour or null, got {align!r}")
+    lights = network_estimate(subject, checkpoint, soft_decode)
+    log_stage(f"network ({checkpoint or 'shipped weights'})", lights, subject)
+    if align == "contour":
+        lights = align_to_contour(subject, lights)
+        log_stage("contour alignment", lights, subject)
+    if selfcal is not None:
+        lights = self_calibrate(subject, lights, selfcal)
+        log_stage("self-calibration", lights, subject)
+    return lights
+
+
+@torch.no_grad()
+def network_estimate(subject: Subject, checkpoint: str | None, soft_decode: bool) -> Lights:
+    """The light network's directions and intensities (mean 1, repeated for RGB)."""
     net, config = load_lightnet(checkpoint)
     resolution = config["recipe"]["resolution"]
     images, mask = network_input(subject.observed_images(), subject.mask, resolution)
@@ -76,7 +93,14 @@ def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode
     directions, intensities = decode_lights(logits["azimuth"], logits["elevation"],
                                             logits["intensity"], soft_decode)
     intensities = intensities[0] / intensities[0].mean()
-    log.info("estimated %d lights with %s", subject.n_images, checkpoint or "the shipped weights")
-    lights = Lights(directions[0].numpy().astype(np.float32),
-                    intensities[:, None].repeat(1, 3).numpy().astype(np.float32), "estimated")
-    return align_to_contour(subject, lights) if align == "contour" else lights
+    return Lights(directions[0].numpy().astype(np.float32),
+                  intensities[:, None].repeat(1, 3).numpy().astype(np.float32), "estimated")
+
+
+def log_stage(stage: str, lights: Lights, subject: Subject) -> None:
+    """One log line per estimation stage, with its error where the subject's lights are known."""
+    errors = light_errors(lights, subject)
+    known = "".join(f", {label} {errors[key]:.{digits}f}{unit}" for key, label, digits, unit in
+                    (("light_dir_mae", "direction error", 2, "°"),
+                     ("light_int_err", "intensity error", 3, "")) if key in errors)
+    log.info("lights of %d images after %s%s", subject.n_images, stage, known)

@@ -9,6 +9,7 @@ import numpy as np
 from unps.data.subject import Subject
 from unps.errors import InputError
 from unps.io.files import atomic_path
+from unps.metrics import light_direction_mae, light_intensity_error
 
 
 @dataclass(frozen=True)
@@ -43,6 +44,18 @@ def with_lights(subject: Subject, lights: Lights) -> Subject:
     images = observed / intensities[:, None, None, :] if intensities is not None else observed
     return subject.replace(images=images, light_directions=lights.directions,
                            light_intensities=intensities)
+
+
+def light_errors(lights: Lights, subject: Subject) -> dict[str, float]:
+    """``light_dir_mae`` (degrees) and ``light_int_err`` (scale-invariant, on the mean of RGB)
+    of ``lights`` against the subject's own, those it has."""
+    errors = {}
+    if subject.light_directions is not None:
+        errors["light_dir_mae"] = light_direction_mae(lights.directions, subject.light_directions)
+    if subject.light_intensities is not None and lights.intensities is not None:
+        errors["light_int_err"] = light_intensity_error(lights.intensities.mean(1),
+                                                        subject.light_intensities.mean(1))
+    return errors
 
 
 def write_lights(path, lights: Lights) -> None:

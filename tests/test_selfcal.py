@@ -1,0 +1,135 @@
+"""Self-calibration of lights (unps.lights.selfcal, unps.lights.model, unps.lights.factorization)."""
+
+import numpy as np
+import pytest
+import torch
+from scipy.spatial.transform import Rotation
+
+from unps.data.subject import Subject
+from unps.errors import InputError
+from unps.lights import Lights, light_errors
+from unps.lights.factorization import aligned_factorization
+from unps.lights.model import DepthPyramid, normals_from_depth
+from unps.lights.selfcal import SelfCalibration, self_calibrate
+from unps.metrics import angular_error
+
+QUICK = SelfCalibration(steps=600, reference_steps=100, max_pixels=1200)
+ROTATION_RECOVERY = SelfCalibration(steps=1500, reference_steps=100, max_pixels=1600)
+
+
+def glossy_sphere(size: int = 48, n_lights: int = 24, seed: int = 0) -> Subject:
+    """A sphere with a two-tone diffuse albedo and one specular lobe (κ = 60), rendered in numpy
+    under a dome of lights with intensities between 0.6 and 1.4."""
+    rng = np.random.default_rng(seed)
+    r, c = np.mgrid[0:size, 0:size]
+    x, y = (c - (size - 1) / 2) / (size * 0.45), -(r - (size - 1) / 2) / (size * 0.45)
+    mask = x ** 2 + y ** 2 < 1
+    normals = np.dstack([x, y, np.sqrt(np.clip(1 - x ** 2 - y ** 2, 0, 1))]) * mask[..., None]
+    slant, azimuth = np.radians(rng.uniform(10, 50, n_lights)), rng.uniform(0, 2 * np.pi, n_lights)
+    lights = np.stack([np.sin(slant) * np.cos(azimuth), np.sin(slant) * np.sin(azimuth), np.cos(slant)], 1)
+    intensities = rng.uniform(0.6, 1.4, n_lights)
+    albedo = np.where((c < size / 2)[..., None], [0.8, 0.5, 0.3], [0.3, 0.6, 0.7])
+    halfway = lights + [0, 0, 1]
+    halfway /= np.linalg.norm(halfway, axis=1, keepdims=True)
+    shading = np.clip(np.einsum("hwc,nc->nhw", normals, lights), 0, None)
+    lobe = 0.6 * np.exp(60 * (np.einsum("hwc,nc->nhw", normals, halfway) - 1))
+    images = shading[..., None] * (albedo + lobe[..., None])        # divided by the intensities
+    return Subject("glossy sphere", (images * mask[..., None]).astype(np.float32), mask,
+                   lights.astype(np.float32), np.repeat(intensities[:, None], 3, 1).astype(np.float32),
+                   normals.astype(np.float32))
+
+
+@pytest.fixture(scope="module")
+def glossy():
+    return glossy_sphere()
+
+
+def rotated(subject: Subject, degrees: float) -> Lights:
+    turn = Rotation.from_rotvec(np.radians(degrees) * np.array([0.6, 0.8, 0.0])).as_matrix()
+    return Lights((subject.light_directions @ turn.T).astype(np.float32), None, "rotated")
+
+
+def test_normals_from_depth_of_a_plane_and_a_sphere_cap():
+    r, c = np.mgrid[0:20, 0:20].astype(np.float32)
+    plane = torch.as_tensor(0.5 * c + 0.25 * (19 - r))           # z = 0.5 x + 0.25 y (y = 19 − row)
+    normals = normals_from_depth(plane, torch.ones(20, 20, dtype=torch.bool)).numpy()
+    expected = np.array([-0.5, -0.25, 1]) / np.linalg.norm([-0.5, -0.25, 1])
+    np.testing.assert_allclose(normals, np.broadcast_to(expected, normals.shape), atol=1e-6)
+    sphere = glossy_sphere(size=40)
+    depth = torch.as_tensor(sphere.normals[..., 2] * 40 * 0.45)
+    inner = torch.as_tensor(sphere.normals[..., 2] > 0.5)
+    found = normals_from_depth(depth, inner).numpy()
+    assert angular_error(found, sphere.normals[inner.numpy()]).mean() < 2
+
+
+def test_depth_pyramid_starts_at_its_start_and_moves_coarse_shape_in_one_step():
+    start = torch.randn(17, 23)
+    pyramid = DepthPyramid(start, levels=3)
+    torch.testing.assert_close(pyramid(), start)
+    pyramid.corrections[2].data.fill_(1.0)
+    torch.testing.assert_close(pyramid(), start + 4.0)
+
+
+def test_aligned_factorization_recovers_the_lights_of_a_lambertian_stack():
+    sphere = glossy_sphere()
+    gray = sphere.images[:, sphere.mask].mean(-1).T
+    lambertian = np.clip(sphere.normals[sphere.mask] @ sphere.light_directions.T, 0, None)
+    _, scaled = aligned_factorization(lambertian * gray.mean(), rotated(sphere, 5).directions)
+    assert angular_error(scaled, rotated(sphere, 5).directions).mean() < 6
+    _, scaled = aligned_factorization(lambertian, sphere.light_directions)
+    assert angular_error(scaled, sphere.light_directions).mean() < 0.5
+
+
+def test_self_calibration_undoes_a_15_degree_rotation_of_the_lights(glossy):
+    start = rotated(glossy, 15)
+    found = self_calibrate(glossy, start, ROTATION_RECOVERY)
+    before, after = light_errors(start, glossy)["light_dir_mae"], light_errors(found, glossy)
+    assert before > 12 and after["light_dir_mae"] < 1.0, after
+    assert after["light_int_err"] < 0.03
+    assert found.source == "selfcal" and found.directions.shape == (glossy.n_images, 3)
+    np.testing.assert_allclose(np.linalg.norm(found.directions, axis=1), 1, atol=1e-5)
+    assert np.exp(np.log(found.intensities.mean(1)).mean()) == pytest.approx(1, abs=1e-5)
+
+
+def test_self_calibration_is_deterministic(glossy):
+    settings = SelfCalibration(steps=60, reference_steps=20, max_pixels=600)
+    first, second = (self_calibrate(glossy, rotated(glossy, 10), settings) for _ in range(2))
+    np.testing.assert_array_equal(first.directions, second.directions)
+    np.testing.assert_array_equal(first.intensities, second.intensities)
+
+
+def test_self_calibration_keeps_its_first_guess_when_the_fit_does_not_help(glossy, caplog):
+    start = rotated(glossy, 10)
+    reckless = SelfCalibration(steps=20, reference_steps=20, max_pixels=600, lr_lights=3.0)
+    assert self_calibrate(glossy, start, reckless) is start
+    assert "keeping the first guess" in caplog.text
+
+
+def test_self_calibration_refuses_stacks_it_cannot_use(glossy):
+    with pytest.raises(InputError, match="at least 4 images"):
+        self_calibrate(glossy.select([0, 1, 2]), rotated(glossy.select([0, 1, 2]), 5), QUICK)
+    dark = glossy.replace(images=np.zeros_like(glossy.images))
+    with pytest.raises(InputError, match="black"):
+        self_calibrate(dark, rotated(dark, 5), QUICK)
+
+
+def test_light_selfcal_in_a_fit_logs_each_stage_and_draws_the_lights(tmp_path, caplog):
+    from hydra import compose, initialize_config_module
+
+    from unps.fit import fit
+
+    with initialize_config_module(config_module="unps.conf", version_base="1.3"):
+        cfg = compose("fit", overrides=[f"paths.output_dir={tmp_path}", "subject=lambertian",
+                                        "subject.size=32", "light=selfcal", "method=woodham",
+                                        "light.selfcal.steps=60", "light.selfcal.reference_steps=20"])
+    with caplog.at_level("INFO"):
+        metrics = fit(cfg)
+    assert metrics["light"] == "selfcal" and np.isfinite(metrics["light_dir_mae"])
+    stages = [line for line in caplog.text.splitlines() if "lights of 32 images after" in line]
+    assert [s.split(" after ")[1].split(" (")[0].split(",")[0] for s in stages] == \
+        ["network", "contour alignment", "self-calibration"]
+    assert all("direction error" in s for s in stages)
+    assert (tmp_path / "lights.png").read_bytes()[:4] == b"\x89PNG"
+    written = np.loadtxt(tmp_path / "lights.txt")
+    assert written.shape == (32, 6)
+    np.testing.assert_allclose(np.linalg.norm(written[:, :3], axis=1), 1, atol=1e-5)

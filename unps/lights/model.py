@@ -1,0 +1,144 @@
+"""The explicit image model that self-calibration fits: a surface, its reflectance and the lights.
+
+Every pixel p of the working grid under image i is rendered as
+
+    X̃_ip = e_i · max(n_p·l_i, 0) · (ρ_p + Σ_k w_k · exp(κ_k (n_p·h_i − 1)))
+
+with n_p the normal of a depth map (so the normals are integrable), ρ_p an RGB diffuse albedo,
+w_k ≥ 0 the weights of K spherical-Gaussian specular lobes of fixed sharpness κ_k shared by the
+whole object, h_i the half vector between l_i and the view v = (0, 0, 1) (orthographic), and
+(l_i, e_i) the direction and intensity of light i.
+
+The lights are parameterised around a Lambertian factorization (:mod:`unps.lights.factorization`):
+s_i = (s̃_i + ε_i)·A, l_i = s_i / |s_i|, e_i = |s_i| (normalised to geometric mean 1). The 3×3
+matrix A carries what the factorization cannot know, and is split as A = [c_x | c_y | μ c_x +
+ν c_y + λ e_z]: the columns c_x, c_y are fixed by the integrability of the depth map, while
+(μ, ν, λ) is the generalised bas-relief (GBR) transform that integrable Lambertian shading leaves
+free and only the specular lobes (and a prior toward the starting lights) pin down. ε_i is a small
+per-light correction.
+
+Frame: x right (+col), y up (−row), z toward the camera; depth in pixels of the working grid.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+VIEW = (0.0, 0.0, 1.0)
+MIN_EXPONENT = -60.0   # lobes below e⁻⁶⁰ are cut: float32 denormals would make the CPU crawl
+
+
+def normals_from_depth(depth: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Unit normals of a depth map at its object pixels, from one-sided differences to the
+    neighbours that are on the object (their mean where both are).
+
+    Args:
+        depth: (H, W) depth along +z in pixel units.
+        mask: (H, W) bool.
+
+    Returns:
+        (m, 3) unit normals at ``mask``'s pixels in row-major order, (−∂z/∂x, −∂z/∂y, 1) normalised.
+
+    Example:
+        >>> ramp = torch.arange(4.0).repeat(3, 1)        # z = col: rises to the right
+        >>> normals_from_depth(ramp, torch.ones(3, 4, dtype=torch.bool))[0]
+        tensor([-0.7071,  0.0000,  0.7071])
+    """
+    on = mask.to(depth.dtype)
+    dz_dcol, dz_drow = _mean_slope(depth, on), _mean_slope(depth.T, on.T).T
+    normals = torch.stack([-dz_dcol, dz_drow, torch.ones_like(depth)], -1)[mask]   # ∂z/∂y = −∂z/∂row
+    return F.normalize(normals, dim=-1)
+
+
+def _mean_slope(z: torch.Tensor, on: torch.Tensor) -> torch.Tensor:
+    """(H, W) slope of z along its last axis at every pixel: the mean of the one-sided
+    differences to the neighbours that are on the object (``on`` is 1 there, 0 elsewhere)."""
+    both = on[:, 1:] * on[:, :-1]
+    step = (z[:, 1:] - z[:, :-1]) * both
+    total = F.pad(step, (1, 0)) + F.pad(step, (0, 1))
+    return total / (F.pad(both, (1, 0)) + F.pad(both, (0, 1))).clamp_min(1)
+
+
+class DepthPyramid(nn.Module):
+    """A depth map as a start plus corrections at ``levels`` scales (full, ½, ¼, …), each
+    upsampled bilinearly: gradient steps move the coarse shape as fast as the fine detail.
+
+    Args:
+        start: (H, W) depth to start from.
+        levels: number of scales.
+    """
+
+    def __init__(self, start: torch.Tensor, levels: int = 4):
+        super().__init__()
+        self.register_buffer("start", start.float())
+        h, w = start.shape
+        self.corrections = nn.ParameterList(
+            nn.Parameter(torch.zeros(1, 1, max(1, h >> k), max(1, w >> k))) for k in range(levels))
+
+    def forward(self) -> torch.Tensor:
+        """(H, W) depth."""
+        depth = self.start
+        for k, correction in enumerate(self.corrections):
+            up = F.interpolate(correction, size=depth.shape, mode="bilinear", align_corners=False)
+            depth = depth + up[0, 0] * 2 ** k
+        return depth
+
+
+class SelfCalibrationModel(nn.Module):
+    """Lights, depth, albedo and specular lobes of one subject on its working grid.
+
+    Args:
+        scaled_lights: (n, 3) s̃_i, the factorization's lights (direction × relative intensity).
+        depth: (H, W) starting depth; mask: (H, W) bool with m object pixels.
+        albedo: (m, 3) starting RGB albedo (> 0).
+        sharpness: the lobes' κ_k.
+    """
+
+    def __init__(self, scaled_lights: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor,
+                 albedo: torch.Tensor, sharpness: tuple[float, ...], levels: int = 4):
+        super().__init__()
+        self.register_buffer("scaled_lights", scaled_lights.float())
+        self.register_buffer("mask", mask)
+        self.register_buffer("sharpness", torch.tensor(sharpness, dtype=torch.float32))
+        self.register_buffer("view", torch.tensor(VIEW))
+        self.depth = DepthPyramid(depth, levels)
+        self.columns = nn.Parameter(torch.eye(3)[:, :2].clone())          # c_x, c_y
+        self.gbr = nn.Parameter(torch.tensor([0.0, 0.0, 1.0]))            # μ, ν, λ
+        self.light_residual = nn.Parameter(torch.zeros_like(self.scaled_lights))
+        self.log_albedo = nn.Parameter(albedo.clamp_min(1e-6).log())
+        self.lobe_logits = nn.Parameter(torch.full((len(sharpness),), -5.0))
+
+    def frame(self) -> torch.Tensor:
+        """(3, 3) A = [c_x | c_y | μ c_x + ν c_y + λ e_z], scaled to determinant ±1."""
+        mu, nu, lam = self.gbr
+        third = mu * self.columns[:, 0] + nu * self.columns[:, 1] + lam * self.view
+        a = torch.cat([self.columns, third[:, None]], 1)
+        return a / torch.det(a).abs().pow(1 / 3)
+
+    def lights(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(n, 3) unit directions and (n,) intensities with geometric mean 1."""
+        scaled = (self.scaled_lights + self.light_residual) @ self.frame()
+        length = scaled.norm(dim=-1)
+        return scaled / length[:, None], (length.log() - length.log().mean()).exp()
+
+    def normals(self) -> torch.Tensor:
+        """(m, 3) unit normals of the current depth."""
+        return normals_from_depth(self.depth(), self.mask)
+
+    def lobes(self) -> torch.Tensor:
+        """(K,) the lobes' weights w_k ≥ 0."""
+        return F.softplus(self.lobe_logits)
+
+    def forward(self) -> torch.Tensor:
+        """(m, n, 3) the rendered images at the object pixels."""
+        directions, intensities = self.lights()
+        normals = self.normals()
+        shading = (normals @ directions.T).clamp_min(0)                                    # (m, n)
+        halfway = F.normalize(directions + self.view, dim=-1)
+        cosine = (normals @ halfway.T).clamp(max=1)
+        exponent = (self.sharpness[:, None, None] * (cosine - 1)).clamp_min(MIN_EXPONENT)
+        specular = torch.einsum("k,kmn->mn", self.lobes(), torch.exp(exponent))
+        radiance = self.log_albedo.exp()[:, None, :] + specular[..., None]
+        return (intensities[None, :, None] * shading[..., None]) * radiance
