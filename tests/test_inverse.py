@@ -212,7 +212,7 @@ def test_fit_writes_the_unps_outputs(tmp_path):
     assert metrics["normal_mae"] < 30
 
 
-def test_a_killed_fit_resumes_from_its_last_checkpoint(tmp_path, monkeypatch):
+def test_a_killed_fit_resumes_from_its_last_checkpoint_and_a_finished_one_reads_out_again(tmp_path, monkeypatch):
     step = InverseRendering.training_step
 
     def dies_at_25(self, batch, batch_idx):
@@ -231,6 +231,9 @@ def test_a_killed_fit_resumes_from_its_last_checkpoint(tmp_path, monkeypatch):
     assert metrics["resumed_from_step"] == 20 and metrics["normal_mae"] < 30
     uninterrupted = tmp_path / "uninterrupted"
     fit(config(uninterrupted, *tiny_overrides(steps=40), "light=gt"))
+    np.testing.assert_array_equal(np.load(tmp_path / "normals.npy"), np.load(uninterrupted / "normals.npy"))
+    rerun = fit(config(uninterrupted, *tiny_overrides(steps=40), "light=gt"))   # a finished folder
+    assert rerun["resumed_from_step"] == 40
     np.testing.assert_array_equal(np.load(tmp_path / "normals.npy"), np.load(uninterrupted / "normals.npy"))
     other = config(tmp_path, *tiny_overrides(steps=40), "light=gt", "preset.lr=1e-3")
     with pytest.raises(InputError, match="belongs to another run"):

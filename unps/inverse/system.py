@@ -91,6 +91,7 @@ class InverseRendering(L.LightningModule):
         self.schedule, self.interreflection = schedule, interreflection
         self.refine_lights, self.fingerprint = refine_lights, fingerprint
         self._resumed_rng: dict | None = None   # a checkpoint's RNG state, until the next step
+        self._interreflection_source: np.ndarray | None = None   # (H, W, 3) N_o of the last update
         self.mask_np = mask
         self.register_buffer("images", images, persistent=False)
         self.register_buffer("mask", torch.as_tensor(mask, dtype=torch.float32)[None, None],
@@ -146,7 +147,12 @@ class InverseRendering(L.LightningModule):
             else:
                 with torch.no_grad():
                     source = self.normals()[0]
-            self.interreflection.update(source[0].permute(1, 2, 0).double().cpu().numpy())
+            self._update_interreflection(source[0].permute(1, 2, 0).double().cpu().numpy())
+
+    def _update_interreflection(self, normals: np.ndarray) -> None:
+        """Refresh the interreflection solve from (H, W, 3) normals, kept for checkpoints."""
+        self.interreflection.update(normals)
+        self._interreflection_source = normals
 
     def training_step(self, batch, batch_idx):
         s = self.schedule
@@ -192,9 +198,16 @@ class InverseRendering(L.LightningModule):
     def on_save_checkpoint(self, checkpoint: dict) -> None:
         checkpoint["unps_fingerprint"] = self.fingerprint
         checkpoint["unps_rng"] = rng_state(self.device)
+        if self._interreflection_source is not None:   # a tensor: checkpoints load weights-only
+            checkpoint["unps_interreflection_source"] = torch.from_numpy(self._interreflection_source)
 
     def on_load_checkpoint(self, checkpoint: dict) -> None:
+        """Restore the generators and the interreflection solve as they were saved, so that a
+        finished fit, which runs no step when resumed, reads out exactly as it ended."""
         self._resumed_rng = checkpoint.get("unps_rng")
+        source = checkpoint.get("unps_interreflection_source")
+        if source is not None and self.interreflection is not None:
+            self._update_interreflection(source.numpy())
 
     def train_dataloader(self):
         return torch.utils.data.DataLoader(range(self.schedule.steps), batch_size=None)
