@@ -78,3 +78,16 @@ def test_resuming_from_a_missing_or_foreign_checkpoint(tmp_path):
     torch.save({"state_dict": {}}, tmp_path / "foreign.ckpt")
     with pytest.raises(InputError, match="foreign.ckpt: not a unps.train checkpoint"):
         train(config(tmp_path / "foreign.ckpt"))
+
+
+def test_black_images_and_non_numeric_noise(sphere):
+    from unps.data.subject import add_noise
+    from unps.solvers.rpca import partial_sum_rpca, robust_init
+
+    black = sphere.replace(images=np.zeros_like(sphere.images))
+    with pytest.raises(InputError, match="every image is black on the object"):
+        robust_init(black, sphere.light_directions)
+    empty = partial_sum_rpca(np.zeros((20, 6)))
+    assert empty.low_rank.shape == (20, 6) and not empty.low_rank.any() and not empty.sparse.any()
+    with pytest.raises(InputError, match="noise must be a number .* got 'abc'"):
+        add_noise(sphere, "abc", seed=0)

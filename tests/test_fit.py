@@ -78,6 +78,17 @@ def test_cli_runs_from_any_folder_and_reports_bad_input(tmp_path):
     assert not (tmp_path / "bad" / "metrics.json").exists()
 
 
+@pytest.mark.parametrize("args, culprit", [
+    (["subject=folder", "method=woodham"], "this subject needs subject.root=…"),
+    (["subject=lambertian", "method=woodham", "light=gt", "noise=abc"], "noise must be a number"),
+])
+def test_cli_names_a_missing_or_malformed_setting(tmp_path, args, culprit):
+    bad = run_cli(*args, f"hydra.run.dir={tmp_path / 'bad'}", cwd=tmp_path)
+    assert bad.returncode == 2 and culprit in bad.stdout + bad.stderr
+    assert "Traceback" not in bad.stdout + bad.stderr
+    assert not (tmp_path / "bad" / "metrics.json").exists()
+
+
 def test_cli_multirun_sweeps_methods(tmp_path):
     done = run_cli("-m", "method=woodham,rpca", "light=gt", "subject=lambertian", "subject.size=24",
                    f"hydra.sweep.dir={tmp_path / 'sweep'}", cwd=tmp_path)

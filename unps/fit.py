@@ -63,6 +63,10 @@ def fit(cfg: DictConfig) -> dict:
     keep_freed_memory()
     out = Path(cfg.paths.output_dir)
     start = time.perf_counter()
+    missing = sorted(OmegaConf.missing_keys(cfg.subject))
+    if missing:
+        raise InputError("this subject needs " + ", ".join(f"{key}=…" for key in missing)
+                         + " on the command line (e.g. subject.root=<folder of images>)")
     subject = instantiate(cfg.subject, _partial_=True)()   # called here so errors reach the user
     subject, noise_reference = add_noise(subject, cfg.noise, seed=cfg.seed)
     original = subject

@@ -348,6 +348,10 @@ def add_noise(subject: Subject, sigma: float, seed: int) -> tuple[Subject, float
     Returns:
         The noisy subject (images divided by the intensities again) and the reference level.
     """
+    try:
+        sigma = float(sigma)
+    except (TypeError, ValueError):
+        raise InputError(f"noise must be a number (a standard deviation >= 0), got {sigma!r}") from None
     if not np.isfinite(sigma) or sigma < 0:
         raise InputError(f"noise must be a standard deviation >= 0, got {sigma}")
     observed = subject.observed_images()

@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from unps.data.subject import Subject
+from unps.errors import InputError
 from unps.solvers.woodham import (Estimate, lambertian_least_squares, normals_from_scaled,
                                   rgb_albedo, to_maps)
 
@@ -89,6 +90,9 @@ def partial_sum_rpca(x: np.ndarray, rank: int = 3, lam: float | None = None,
     lam = 1.0 / np.sqrt(max(x.shape)) if lam is None else float(lam)
     norm_x = torch.linalg.norm(x)
     spectral = torch.linalg.eigvalsh((x.T @ x).double())[-1].sqrt().item()
+    if spectral == 0:                                   # X = 0: nothing low-rank, nothing sparse
+        zeros = np.zeros(tuple(reversed(x.shape)) if transpose else tuple(x.shape))
+        return RPCAResult(zeros, zeros.copy(), 0, 0.0)
     mu, mu_max = 1.25 / spectral, 1.25 / spectral * 1e7
     u = x / (max(spectral, x.abs().max().item() / lam) * mu)
     e = torch.zeros_like(x)
@@ -123,6 +127,9 @@ def robust_init(subject: Subject, light_directions: np.ndarray, rank: int = 3,
         rank, lam, tol, max_iter: see :func:`partial_sum_rpca`.
     """
     pixels = subject.images[:, subject.mask]                          # (n, m, 3)
+    if not np.any(pixels > 0):
+        raise InputError(f"subject {subject.name!r}: every image is black on the object, so there "
+                         f"is nothing to solve")
     result = partial_sum_rpca(pixels.mean(-1).T, rank, lam, tol, max_iter)
     log.info("robust init: %d ADMM iterations, residual %.1e, %.1f%% of entries are outliers",
              result.iterations, result.residual, 100 * np.mean(result.sparse != 0))
