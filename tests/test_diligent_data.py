@@ -52,6 +52,14 @@ def test_reading_the_crops_as_truncated_lowers_both_errors(name):
                 < mae(rounded, solve(rounded, rounded.light_directions)) - 0.3), solve.__name__
 
 
+def test_the_folder_path_reads_the_crops_as_made(caplog):
+    folder = diligent_object("pmsData_crop/catPNG")
+    with caplog.at_level("INFO"):
+        auto = read_diligent(folder, drop=["4-95"], quantization="auto")
+    np.testing.assert_array_equal(auto.images, read_diligent(folder, drop=["4-95"], quantization="floor").images)
+    assert "read as quantization=floor" in caplog.text
+
+
 def test_a_crop_round_trips_bit_for_bit(tmp_path):
     s = read_diligent(diligent_object("pmsData_crop/catPNG"), drop=["8-95"])
     write_diligent(s, tmp_path / "cat")

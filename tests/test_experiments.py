@@ -99,6 +99,8 @@ def test_diligent_crops_are_read_as_truncated_and_originals_as_rounded(tmp_path)
                                       read_diligent(folder, quantization=expected).images)
         assert not np.array_equal(read_diligent(folder, quantization="round").images,
                                   read_diligent(folder, quantization="floor").images)
+        np.testing.assert_array_equal(read_diligent(folder, quantization="auto").images,   # 16-bit
+                                      read_diligent(folder, quantization="round").images)
     with pytest.raises(InputError, match="quantization must be round or floor.*'nearest'"):
         read_diligent_object(tmp_path, "cat", quantization="nearest")
 

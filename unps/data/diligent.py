@@ -56,14 +56,17 @@ def read_diligent(root: str | os.PathLike, drop: Sequence[int | str] = (),
         downsample: block-average by this factor.
         name: the subject's name; defaults to the folder name without ``PNG``.
         quantization: ``round``, or ``floor`` for images truncated from a deeper source, such as
-            the 8-bit crops (see :func:`unps.io.images.read_image`).
+            the 8-bit crops (see :func:`unps.io.images.read_image`); ``auto``: ``floor`` for
+            8-bit PNGs in PS-FCN's crop layout (``…/pmsData_crop/<name>PNG``), else ``round``.
 
     Raises:
         InputError: a required file is missing, unreadable or inconsistent.
     """
     root = _check_root(root)
-    check_quantization(quantization)
     filenames = _read_filenames(root / FILENAMES)
+    if quantization == "auto":
+        quantization = _layout_quantization(root, filenames)
+    check_quantization(quantization)
     subject = _read_layout(root, filenames, mask_file=root / MASK, require_mask=True,
                            require_lights=True, encoding="linear", quantization=quantization,
                            name=name)
@@ -72,6 +75,23 @@ def read_diligent(root: str | os.PathLike, drop: Sequence[int | str] = (),
 
 OBJECTS = ("ball", "bear", "buddha", "cat", "cow", "goblet", "harvest", "pot1", "pot2", "reading")
 LAYOUTS = ("pmsData", "pmsData_crop")   # the original release, then PS-FCN's 8-bit crops
+
+
+def _layout_quantization(root: Path, filenames: Sequence[str]) -> str:
+    """``floor`` for 8-bit PNGs in PS-FCN's crop layout, which were made as ⌊16-bit / 256⌋;
+    ``round`` otherwise. Logs the choice for the crops."""
+    first = root / filenames[0]
+    try:
+        with open(first, "rb") as f:
+            header = f.read(25)
+    except OSError:
+        return "round"          # the reader names the missing file
+    eight_bit = header[:8] == b"\x89PNG\r\n\x1a\n" and len(header) == 25 and header[24] == 8
+    if root.parent.name == LAYOUTS[1] and eight_bit:
+        log.info("%s: 8-bit PNGs in PS-FCN's crop layout, read as quantization=floor (they were "
+                 "made as floor(16-bit / 256); subject.quantization=round reads them as given)", root)
+        return "floor"
+    return "round"
 
 
 def find_diligent_object(data_dir: str | os.PathLike, name: str) -> Path:

@@ -26,8 +26,8 @@ def check_quantization(quantization: str) -> str:
         InputError: any other value.
     """
     if quantization not in QUANTIZATIONS:
-        raise InputError(f"quantization must be {' or '.join(QUANTIZATIONS)} (or auto for a "
-                         f"DiLiGenT object read by name), got {quantization!r}")
+        raise InputError(f"quantization must be {' or '.join(QUANTIZATIONS)} (or auto for DiLiGenT "
+                         f"folders and objects), got {quantization!r}")
     return quantization
 
 
