@@ -238,3 +238,13 @@ def test_empty_folder_and_bad_encoding(tmp_path):
         read_folder(tmp_path)
     with pytest.raises(InputError, match="encoding must be auto, linear or srgb"):
         read_folder(tmp_path, encoding="gamma")
+
+
+def test_a_nan_in_an_image_names_the_file_and_the_pixel(tmp_path, sphere):
+    write_diligent(sphere, tmp_path / "obj", image_format="tiff32")
+    first = tmp_path / "obj" / (tmp_path / "obj" / "filenames.txt").read_text().split()[0]
+    image = cv2.imread(str(first), cv2.IMREAD_UNCHANGED)
+    image[2, 5] = np.nan
+    cv2.imwrite(str(first), image)
+    with pytest.raises(InputError, match=rf"{first.name}: contains NaN or Inf \(first at row 3, column 6"):
+        read_diligent(tmp_path / "obj")

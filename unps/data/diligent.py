@@ -317,6 +317,10 @@ def _read_layout(root: Path, filenames: list[str], mask_file: Path, require_mask
         if im.shape != size:
             raise InputError(f"{p}: image is {im.shape[1]}×{im.shape[0]}, but {paths[0].name} "
                              f"is {size[1]}×{size[0]}; all images must have one size")
+        if not np.isfinite(im).all():
+            row, col = np.argwhere(~np.isfinite(im))[0][:2] + 1
+            raise InputError(f"{p}: contains NaN or Inf (first at row {row}, column {col}, "
+                             f"counting from 1)")
     images = np.stack(images)
     if encoding == "srgb":
         images = srgb_to_linear(images)
