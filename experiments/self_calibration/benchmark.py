@@ -42,10 +42,24 @@ def load(name: str, data: Path):
     if name in DILIGENT:
         return read_diligent_object(data / "DiLiGenT", name)
     from hydra import compose, initialize_config_module
+    from hydra.errors import MissingConfigException
     from hydra.utils import instantiate
 
     with initialize_config_module("unps.conf", version_base=None):
-        return instantiate(compose("fit", overrides=[f"subject={name}"]).subject, _partial_=True)()
+        try:
+            config = compose("fit", overrides=[f"subject={name}"])
+        except MissingConfigException:
+            raise InputError(f"no subject {name!r} (unps.conf/subject has none)") from None
+        return instantiate(config.subject, _partial_=True)()
+
+
+def available(names, data: Path):
+    """(name, subject) for each subject that can be read; a line saying why for the others."""
+    for name in names:
+        try:
+            yield name, load(name, data)
+        except InputError as e:
+            print(f"{name:<10} skipped: {e}")
 
 
 def rpca_error(subject, lights: Lights) -> float:
@@ -57,12 +71,7 @@ def rpca_error(subject, lights: Lights) -> float:
 def compare(names, data: Path, settings: SelfCalibration) -> None:
     print(f"{'subject':<10} {'network':>8} {'contour':>8} {'selfcal':>8} {'int err':>8} │ "
           f"{'RPCA with: network':>19} {'contour':>8} {'selfcal':>8} {'GT':>6} │ {'time':>6}")
-    for name in names:
-        try:
-            subject = load(name, data)
-        except InputError as e:
-            print(f"{name:<10} skipped: {e}")
-            continue
+    for name, subject in available(names, data):
         truth = Lights(subject.light_directions, subject.light_intensities, "gt")
         network = network_estimate(subject, None, soft_decode=True)
         contour = align_to_contour(subject, network)
@@ -93,12 +102,7 @@ def perturbation(names, data: Path, settings: SelfCalibration, seed: int) -> Non
     cases = ((10, 0), (20, 0), (40, 0), (0, 10))
     print(f"\nstarts perturbed from the true lights (seed {seed}): direction MAE start → end")
     print(f"{'subject':<10}" + "".join(f"{f'rot {r}° jitter {j}°':>22}" for r, j in cases))
-    for name in names:
-        try:
-            subject = load(name, data)
-        except InputError as e:
-            print(f"{name:<10} skipped: {e}")
-            continue
+    for name, subject in available(names, data):
         row = ""
         for rotation, jitter in cases:
             start = Lights(perturbed(subject.light_directions, rotation, jitter, seed), None, "perturbed")
