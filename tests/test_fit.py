@@ -96,3 +96,40 @@ def test_cli_multirun_sweeps_methods(tmp_path):
     methods = sorted(json.loads(p.read_text())["method"]
                      for p in (tmp_path / "sweep").glob("*/metrics.json"))
     assert methods == ["rpca", "woodham"]
+
+
+def test_a_killed_sweep_reruns_to_the_end_and_a_finished_one_reruns_cleanly(tmp_path):
+    """Kill a two-job unps sweep after its first checkpoint; the same command finishes it (the
+    killed job resumes, the other runs); run once more, every job reads out its finished fit."""
+    import os
+    import signal
+    import time
+
+    sweep = tmp_path / "sweep"
+    command = [sys.executable, "-m", "unps.fit", "-m", "subject=lambertian", "subject.size=24",
+               "light=gt", "preset.steps=200", "preset.lr_drop_at=180", "preset.update_every=20",
+               "preset.width=8", "seed=0,1", f"hydra.sweep.dir={sweep}"]
+    first = subprocess.Popen(command, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                             start_new_session=True)
+    deadline = time.time() + 240
+    while not list(sweep.glob("*/checkpoints/last.ckpt")) and first.poll() is None and time.time() < deadline:
+        time.sleep(0.2)
+    assert first.poll() is None, "the sweep finished before it could be killed"
+    os.killpg(first.pid, signal.SIGKILL)
+    first.wait()
+    assert not list(sweep.glob("*/metrics.json"))
+
+    for attempt in ("finish", "rerun finished"):
+        done = subprocess.run(command, cwd=tmp_path, capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr[-3000:]
+        assert "Traceback" not in done.stdout + done.stderr
+        runs = {m["seed"]: m for m in (json.loads(p.read_text()) for p in sweep.glob("*/metrics.json"))}
+        assert sorted(runs) == [0, 1], attempt
+    assert runs[0]["resumed_from_step"] == 200 == runs[1]["resumed_from_step"]
+
+
+def test_help_lists_the_groups_that_apply_and_examples(tmp_path):
+    done = run_cli("--help", cwd=tmp_path)
+    assert done.returncode == 0
+    assert "Config groups" in done.stdout and "selfcal estimated gt refine" in done.stdout
+    assert "recipe" not in done.stdout and "mimo" not in done.stdout and "Examples:" in done.stdout

@@ -13,7 +13,7 @@ from unps.fit import fit
 from unps.inverse.fit import (Preset, interreflection_bend, neural_inverse_rendering, upsample_normals,
                               upsample_with_detail, working_factor)
 from unps.inverse.interreflection import Interreflection
-from unps.inverse.networks import NormalNet, ReflectanceNet, shading, specular_map
+from unps.inverse.networks import NormalNet, ReflectanceNet, normal_net_input, shading, specular_map
 from unps.inverse.system import InverseRendering
 from unps.metrics import angular_error
 
@@ -53,7 +53,7 @@ def test_shading_is_clamped_lambertian():
 
 def test_networks_shapes_unit_normals_and_initialisation():
     net = NormalNet(n_images=5, width=24, depth=4)
-    normals, features = net(torch.rand(1, 15, 9, 11), torch.ones(1, 1, 9, 11))
+    normals, features = net(normal_net_input(torch.rand(5, 3, 9, 11), torch.ones(9, 11)))
     assert normals.shape == (1, 3, 9, 11) and features.shape == (1, 24, 9, 11)
     torch.testing.assert_close(normals.norm(dim=1), torch.ones(1, 9, 11))
     weights = torch.cat([m.weight.flatten() for m in net.modules() if isinstance(m, torch.nn.Conv2d)])
@@ -69,7 +69,7 @@ def test_the_global_term_equals_concatenating_the_features_to_every_image():
     weight = torch.cat([refl.image_in.weight, refl.feature_in.weight], 1)
     joint = torch.nn.functional.conv2d(
         torch.nn.functional.pad(torch.cat([images, spec, features.expand(2, -1, -1, -1)], 1),
-                                (1, 1, 1, 1), mode="replicate"), weight, refl.image_in.bias)
+                                (1, 1, 1, 1)), weight, refl.image_in.bias)
     split = refl.image_in(torch.cat([images, spec], 1)) + refl.global_term(features)
     torch.testing.assert_close(joint, split)
 

@@ -25,13 +25,26 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from unps.allocator import keep_freed_memory
+from unps.checks import check_light_span, collected_warnings, usable_subject
 from unps.data.subject import add_noise
 from unps.errors import InputError, exit_on_bad_input
 from unps.geometry import integrate_normals
 from unps.lights import Lights, ground_truth, light_errors, with_lights
 from unps.metrics import angular_error, normal_metrics
+from unps.threads import set_fit_threads
+from unps.timing import recording, stage
 
 log = logging.getLogger("unps.fit")
+
+
+def launcher_config() -> dict | None:
+    """The Hydra launcher's settings when this fit is one job of a multirun, else None."""
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+
+    if not HydraConfig.initialized() or HydraConfig.get().mode != RunMode.MULTIRUN:
+        return None
+    return OmegaConf.to_container(HydraConfig.get().launcher, resolve=True)
 
 
 def build(node: DictConfig) -> tuple[str, Any]:
@@ -53,13 +66,22 @@ def fit(cfg: DictConfig) -> dict:
     The subject is read and validated and the lights resolved before anything is written.
 
     Returns:
-        The metrics also written to ``metrics.json``.
+        The metrics also written to ``metrics.json``, with the seconds of each stage so far
+        (``stage_seconds``, :mod:`unps.timing`) and every warning logged (``warnings``,
+        :mod:`unps.checks`).
     """
+    with recording() as seconds, collected_warnings() as warnings:
+        return run_fit(cfg, seconds, warnings)
+
+
+def run_fit(cfg: DictConfig, seconds: dict[str, float], warnings: list[str]) -> dict:
+    """:func:`fit`'s body; ``seconds`` and ``warnings`` fill as it goes."""
     from lightning import seed_everything
 
     from unps.io.outputs import write_fit_outputs
 
     seed_everything(cfg.seed, workers=True, verbose=False)
+    threads, source = set_fit_threads(cfg.get("threads"), launcher_config())
     keep_freed_memory()
     out = Path(cfg.paths.output_dir)
     start = time.perf_counter()
@@ -67,7 +89,9 @@ def fit(cfg: DictConfig) -> dict:
     if missing:
         raise InputError("this subject needs " + ", ".join(f"{key}=…" for key in missing)
                          + " on the command line (e.g. subject.root=<folder of images>)")
-    subject = instantiate(cfg.subject, _partial_=True)()   # called here so errors reach the user
+    with stage("reading"):
+        subject = instantiate(cfg.subject, _partial_=True)()   # called here so errors reach the user
+    subject = usable_subject(subject)
     subject, noise_reference = add_noise(subject, cfg.noise, seed=cfg.seed)
     original = subject
     light_name, light_source = build(cfg.light)
@@ -76,7 +100,10 @@ def fit(cfg: DictConfig) -> dict:
     if refine and method_name != "unps":
         raise InputError(f"light=refine refines the lights inside the neural inverse rendering, "
                          f"so it needs method=unps, not method={method_name}")
-    lights = light_source(subject)
+    with stage("lights"):
+        lights = light_source(subject)
+    condition = check_light_span(lights.directions, f"the lights of {subject.name!r} ({light_name})",
+                                 estimated=lights.source != "gt")
     light_metrics = {}
     if lights.source != "gt":
         light_metrics = light_errors(lights, subject)
@@ -85,12 +112,14 @@ def fit(cfg: DictConfig) -> dict:
         method = partial(method, refine_lights=refine, output_dir=out)
     h, w = subject.resolution
     log.info("%s: %d images, %d×%d pixels (%d on the object), read in %.1f s; lights: %s; "
-             "method: %s", subject.name, subject.n_images, w, h, subject.mask.sum(),
-             time.perf_counter() - start, light_name, method_name)
+             "method: %s; %d torch threads (%s)", subject.name, subject.n_images, w, h,
+             subject.mask.sum(), time.perf_counter() - start, light_name, method_name, threads, source)
 
     start = time.perf_counter()
-    estimate = method(subject, lights.directions)
-    depth = integrate_normals(estimate.normals, subject.mask)
+    with stage("method"):
+        estimate = method(subject, lights.directions)
+    with stage("depth"):
+        depth = integrate_normals(estimate.normals, subject.mask)
     runtime = time.perf_counter() - start
     if refine:
         rendering = estimate.rendering
@@ -116,7 +145,11 @@ def fit(cfg: DictConfig) -> dict:
                  "(%.2f s)", metrics["normal_mae"], metrics["normal_median"], 100 * metrics["acc_11_25"],
                  metrics["slant_bias"], runtime)
     true_lights = ground_truth(original) if lights.source != "gt" and original.calibrated else None
-    write_fit_outputs(out, subject, estimate, depth, lights, metrics, error, true_lights)
+    metrics["light_condition"] = condition if np.isfinite(condition) else None
+    metrics["warnings"] = list(warnings)
+    metrics["stage_seconds"] = dict(seconds)
+    with stage("writing"):
+        write_fit_outputs(out, subject, estimate, depth, lights, metrics, error, true_lights)
     return metrics
 
 

@@ -1,6 +1,9 @@
-"""TensorBoard pictures of a fit in progress (rank zero only)."""
+"""What a fit in progress shows: TensorBoard pictures and log lines (rank zero only)."""
 
 from __future__ import annotations
+
+import logging
+import time
 
 import lightning as L
 import numpy as np
@@ -9,6 +12,9 @@ from lightning.pytorch.utilities import rank_zero_only
 
 from unps.geometry import integrate_normals
 from unps.io.pictures import error_rgb, normal_rgb
+from unps.timing import stage
+
+log = logging.getLogger("unps.inverse.fit")
 
 
 def depth_rgb(depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -39,7 +45,10 @@ class FitPictures(L.Callback):
         step = trainer.global_step
         if trainer.logger is None or (step % self.every and step != trainer.max_steps):
             return
-        writer = trainer.logger.experiment
+        with stage("progress pictures"):
+            self.write(trainer.logger.experiment, module, step)
+
+    def write(self, writer, module, step: int) -> None:
         mask = module.mask_np
         with torch.no_grad():
             index = torch.tensor([(step // self.every) % module.images.shape[0]], device=module.device)
@@ -59,3 +68,37 @@ class FitPictures(L.Callback):
         reflectance = out["reflectance"][0].permute(1, 2, 0).cpu().numpy() * mask[..., None]
         level = max(float(np.percentile(reflectance[mask], 99)), 1e-12)
         writer.add_image("fit/reflectance", np.clip(reflectance / level, 0, 1), step, dataformats="HWC")
+
+
+class ProgressLog(L.Callback):
+    """One log line every ``every`` steps and at the end: step, loss, MAE when the truth is
+    known, seconds per step and time left. Readable in a terminal and in the run's log file,
+    where a progress bar is not."""
+
+    def __init__(self, every: int = 100):
+        self.every = every
+        self._start: float | None = None
+        self._first_step = 0
+
+    def on_train_start(self, trainer, module) -> None:
+        self._start, self._first_step = time.perf_counter(), trainer.global_step
+
+    @rank_zero_only
+    def on_train_batch_end(self, trainer, module, outputs, batch, batch_idx) -> None:
+        step = trainer.global_step
+        if step % self.every and step != trainer.max_steps:
+            return
+        done = step - self._first_step
+        per_step = (time.perf_counter() - self._start) / max(done, 1)
+        metrics = trainer.callback_metrics
+        shown = [f"loss {float(metrics['loss/reconstruction']):.4f}"] if "loss/reconstruction" in metrics else []
+        if "mae" in metrics:
+            shown.append(f"normal error {float(metrics['mae']):.2f}°")
+        log.info("step %d/%d: %s (%.3f s/step, %s left)", step, trainer.max_steps, ", ".join(shown),
+                 per_step, duration(per_step * (trainer.max_steps - step)))
+
+
+def duration(seconds: float) -> str:
+    """'42 s', '3 min 05 s'."""
+    seconds = int(round(seconds))
+    return f"{seconds} s" if seconds < 60 else f"{seconds // 60} min {seconds % 60:02d} s"

@@ -20,6 +20,7 @@ import json
 import logging
 import math
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -37,9 +38,14 @@ from unps.metrics import angular_error
 from unps.solvers.nayar import reflectance_scale
 from unps.solvers.rpca import robust_init
 from unps.solvers.woodham import Estimate, rgb_albedo
+from unps.timing import stage
 
 log = logging.getLogger(__name__)
 
+# Lightning warnings that do not apply to a one-subject fit: the "data loader" is a step counter
+# whose random draws the checkpoints restore, and a deprecation inside Lightning itself.
+LIGHTNING_NOISE = (".*dataloader is not resumable.*", ".*does not have many workers.*",
+                   ".*LeafSpec.*is deprecated.*")
 CROP_MARGIN = 4   # pixels of background kept around the object so convolutions see its edge
 
 
@@ -153,17 +159,20 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
     log.info("unps (%s preset): working grid %d×%d (%d object pixels, ×%d coarser than the subject), "
              "%d images", preset.name, w, h, work.mask.sum(), factor, work.n_images)
 
-    system, scale = build_system(work, light_directions, preset, interreflection, refine_lights,
-                                 fingerprint(work, light_directions, settings))
+    with stage("system assembly"):
+        system, scale = build_system(work, light_directions, preset, interreflection, refine_lights,
+                                     fingerprint(work, light_directions, settings))
     solver = system.interreflection
     parameters = sum(p.numel() for p in system.parameters() if p.requires_grad)
     log.info("networks: %.2f M parameters; %d steps", parameters / 1e6, schedule.steps)
 
-    seconds, resumed_from = train(system, schedule, output_dir, subject.name)
+    with stage("steps"):
+        seconds, resumed_from = train(system, schedule, output_dir, subject.name)
     steps_run = schedule.steps - resumed_from
     log.info("fitted %d steps in %.1f s (%.3f s/step)", steps_run, seconds, seconds / max(steps_run, 1))
 
-    rendering = final_rendering(system, schedule.images_per_step or 16, scale)
+    with stage("read-out"):
+        rendering = final_rendering(system, schedule.images_per_step or 16, scale)
     normals, pseudo_normals = rendering.pop("normals"), rendering.pop("pseudo_normals")
     bend = interreflection_bend(normals, pseudo_normals, work.mask) if solver else None
     if bend is not None:
@@ -171,10 +180,13 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
                  bend["mean"], bend["max"])
     if factor > 1:
         coarse_init = system.init_normals[0].permute(1, 2, 0).cpu().numpy()
-        normals = upsample_with_detail(normals, coarse_init, robust_init(cropped, light_directions).normals,
-                                       work.mask, factor)
-    normals, albedo = on_subject_grid(normals, cropped, subject, rendering["light_directions"],
-                                      rendering["light_scales"])
+        with stage("robust initialisation"):
+            fine_init = robust_init(cropped, light_directions).normals
+        with stage("read-out"):
+            normals = upsample_with_detail(normals, coarse_init, fine_init, work.mask, factor)
+    with stage("read-out"):
+        normals, albedo = on_subject_grid(normals, cropped, subject, rendering["light_directions"],
+                                          rendering["light_scales"])
     info = {"fit_resolution": [h, w], "fit_downsample": factor, "fit_steps": schedule.steps,
             "fit_s_per_step": seconds / max(steps_run, 1), "resumed_from_step": resumed_from,
             "parameters": parameters, "facets": solver.n_facets if solver else 0, "preset": preset.name,
@@ -193,7 +205,8 @@ def build_system(work: Subject, light_directions: np.ndarray, preset: Preset, in
     Raises:
         InputError: the images are black on the object.
     """
-    init = robust_init(work, light_directions)
+    with stage("robust initialisation"):
+        init = robust_init(work, light_directions)
     mask = work.mask
     scale = float(np.percentile(work.images[:, mask], 99))    # the white level: images in [0, ~1]
     if not scale > 0:
@@ -285,10 +298,11 @@ def train(system: InverseRendering, schedule: Schedule, output_dir: str | Path |
     from lightning.pytorch.callbacks import ModelCheckpoint
     from lightning.pytorch.loggers import TensorBoardLogger
 
-    from unps.inverse.callbacks import FitPictures
+    from unps.inverse.callbacks import FitPictures, ProgressLog
 
     ckpt_path, resumed_from = None, 0
-    options: dict = dict(logger=False, enable_checkpointing=False, callbacks=[])
+    progress = ProgressLog(every=schedule.update_every)
+    options: dict = dict(logger=False, enable_checkpointing=False, callbacks=[progress])
     if output_dir is not None:
         out = Path(output_dir)
         last = out / "checkpoints" / "last.ckpt"
@@ -303,12 +317,16 @@ def train(system: InverseRendering, schedule: Schedule, output_dir: str | Path |
             logger=TensorBoardLogger(str(out), name="tensorboard", version=""),
             callbacks=[ModelCheckpoint(dirpath=out / "checkpoints", save_last=True, save_top_k=0,
                                        every_n_train_steps=schedule.update_every),
-                       FitPictures(every=schedule.update_every)])
+                       FitPictures(every=schedule.update_every), progress])
     trainer = L.Trainer(max_steps=schedule.steps, accelerator="auto", devices=1, log_every_n_steps=10,
-                        enable_model_summary=False, num_sanity_val_steps=0, **options)
+                        enable_model_summary=False, enable_progress_bar=False, num_sanity_val_steps=0,
+                        **options)
     start = time.perf_counter()
     try:
-        trainer.fit(system, ckpt_path=ckpt_path)
+        with warnings.catch_warnings():
+            for message in LIGHTNING_NOISE:
+                warnings.filterwarnings("ignore", message=message)
+            trainer.fit(system, ckpt_path=ckpt_path)
     except Diverged as e:
         kept = (f"; the last good state (step {schedule.update_every}·k) is kept in "
                 f"{Path(output_dir) / 'checkpoints' / 'last.ckpt'}" if output_dir is not None else "")

@@ -27,6 +27,7 @@ import torch
 import torch.nn.functional as F
 
 from unps.data.subject import block_mean
+from unps.errors import InputError
 from unps.geometry import integrate_normals
 from unps.solvers.nayar import interreflection_kernel
 
@@ -47,11 +48,11 @@ class Interreflection:
     def __init__(self, mask: np.ndarray, albedo: np.ndarray, downsample: int = 4,
                  occlusion: bool = True):
         if int(downsample) != downsample or downsample < 1:
-            raise ValueError(f"interreflection.downsample must be a whole number >= 1, got {downsample}")
+            raise InputError(f"interreflection.downsample must be a whole number >= 1, got {downsample}")
         self.mask, self.factor, self.occlusion = mask, int(downsample), occlusion
         facet_albedo, self.facets = block_mean(albedo[..., None], mask, self.factor)
         if not self.facets.any():
-            raise ValueError(f"no facet is at least half on the object at interreflection.downsample="
+            raise InputError(f"no facet is at least half on the object at interreflection.downsample="
                              f"{downsample}: the object is too small for that factor")
         self.albedo_full = torch.as_tensor(albedo, dtype=torch.float32)
         self.albedo = torch.as_tensor(facet_albedo[self.facets, 0], dtype=torch.float32)

@@ -14,9 +14,6 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-VIEW = (0.0, 0.0, 1.0)   # orthographic camera looking down −z: v points from the surface to it
-
-
 def init_gaussian(module: nn.Module, std: float = 0.02) -> None:
     """Draw every conv weight from N(0, std²) and zero the biases (the paper's initialisation;
     its "0.02 variance" is read as DCGAN's customary standard deviation 0.02)."""
@@ -28,7 +25,19 @@ def init_gaussian(module: nn.Module, std: float = 0.02) -> None:
 
 
 def _conv(cin: int, cout: int, kernel: int) -> nn.Conv2d:
-    return nn.Conv2d(cin, cout, kernel, padding=kernel // 2, padding_mode="replicate")
+    """Zero padding: the grid is a crop with black background around the object, and zeros
+    continue it (replicate padding cost a fifth of each CPU step for nothing the fit uses)."""
+    return nn.Conv2d(cin, cout, kernel, padding=kernel // 2)
+
+
+def normal_net_input(images: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """(n, 3, H, W) images and (H, W) mask → (1, 3n + 1, H, W), :class:`NormalNet`'s input.
+
+    It is the same at every step, so it is built once, channels-last (the layout the CPU's
+    convolutions run fastest in).
+    """
+    stacked = torch.cat([images.flatten(0, 1), mask.to(images.dtype)[None]])[None]
+    return stacked.contiguous(memory_format=torch.channels_last)
 
 
 class NormalNet(nn.Module):
@@ -56,16 +65,16 @@ class NormalNet(nn.Module):
         self.head = _conv(width, 3, 3)
         init_gaussian(self)
 
-    def forward(self, images: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """
         Args:
-            images: (1, 3n, H, W) normalised images.
-            mask: (1, 1, H, W) float, 1 on the object.
+            inputs: (1, 3n + 1, H, W), the normalised images and the mask
+                (:func:`normal_net_input`).
 
         Returns:
             normals (1, 3, H, W) unit, and features (1, width, H, W).
         """
-        features = self.features(torch.cat([images, mask], 1))
+        features = self.features(inputs)
         return F.normalize(self.head(features), dim=1, eps=1e-8), features
 
 
@@ -86,8 +95,7 @@ class ReflectanceNet(nn.Module):
     def __init__(self, feature_width: int, width: int = 16, depth: int = 3):
         super().__init__()
         self.image_in = _conv(4, width, 3)
-        self.feature_in = nn.Conv2d(feature_width, width, 3, padding=1, padding_mode="replicate",
-                                    bias=False)
+        self.feature_in = nn.Conv2d(feature_width, width, 3, padding=1, bias=False)
         layers: list[nn.Module] = []
         for _ in range(depth - 2):
             layers += [_conv(width, width, 3), nn.LeakyReLU(0.1)]

@@ -12,7 +12,8 @@ from unps.geometry import depth_to_mesh
 from unps.io.files import atomic_path, write_json, write_npy
 from unps.io.images import write_png8
 from unps.io.mesh import write_ply
-from unps.io.pictures import albedo_rgb, error_figure_png, error_rgb, lights_figure_png, normal_rgb
+from unps.io.pictures import (albedo_rgb, error_figure_png, error_rgb, labelled_rows, lights_figure_png,
+                               normal_rgb)
 from unps.lights import Lights, write_lights
 from unps.solvers.woodham import Estimate
 
@@ -93,9 +94,10 @@ def write_rendering(out: Path, rendering) -> None:
     mask = rendering.mask[..., None]
     observed, reconstructed = rendering.observed[picks] * mask, rendering.reconstruction[picks] * mask
     level = max(float(np.percentile(observed[:, rendering.mask], 99)), 1e-12)
-    rows = [observed, reconstructed, np.abs(observed - reconstructed)]
-    sheet = np.concatenate([np.concatenate(list(r), 1) for r in rows], 0) / level
-    write_png8(out / "reconstruction.png", np.round(np.clip(sheet, 0, 1) * 255).astype(np.uint8))
+    rows = [np.round(np.clip(np.concatenate(list(r), 1) / level, 0, 1) * 255).astype(np.uint8)
+            for r in (observed, reconstructed, np.abs(observed - reconstructed))]
+    write_png8(out / "reconstruction.png",
+               labelled_rows(rows, ["observed", "reconstructed", "|difference|"]))
     reflectance = rendering.reflectance[picks] * mask
     level = max(float(np.percentile(reflectance[:, rendering.mask], 99)), 1e-12)
     sheet = np.concatenate(list(reflectance), 1) / level

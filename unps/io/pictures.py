@@ -111,3 +111,26 @@ def lights_figure_png(directions: np.ndarray, intensities: np.ndarray | None, ti
     fig.savefig(buffer, format="png", bbox_inches="tight")
     plt.close(fig)
     return buffer.getvalue()
+
+
+def labelled_rows(rows: list[np.ndarray], labels: list[str]) -> np.ndarray:
+    """Stack (h, w, 3) uint8 picture rows under one another with each row's label written in a
+    dark strip on its left → (Σh, w + strip, 3) uint8.
+
+    Example:
+        >>> labelled_rows([np.zeros((40, 50, 3), np.uint8)] * 2, ["observed", "fit"]).shape[0]
+        80
+    """
+    import cv2
+
+    height = min(row.shape[0] for row in rows)
+    scale = float(np.clip(height / 90, 0.3, 0.8))
+    sizes = [cv2.getTextSize(label, cv2.FONT_HERSHEY_SIMPLEX, scale, 1) for label in labels]
+    strip = max(width for (width, _), _ in sizes) + 12
+    out = []
+    for row, label, ((_, text_height), _) in zip(rows, labels, sizes):
+        band = np.full((row.shape[0], strip, 3), 24, np.uint8)
+        cv2.putText(band, label, (6, (row.shape[0] + text_height) // 2), cv2.FONT_HERSHEY_SIMPLEX,
+                    scale, (235, 235, 235), 1, cv2.LINE_AA)
+        out.append(np.concatenate([band, row], 1))
+    return np.concatenate(out, 0)

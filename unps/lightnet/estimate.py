@@ -14,6 +14,7 @@ from unps.lightnet.system import load_lightnet
 from unps.lights import Lights, light_errors
 from unps.lights.contour import align_to_contour
 from unps.lights.selfcal import SelfCalibration, self_calibrate
+from unps.timing import stage
 
 log = logging.getLogger(__name__)
 
@@ -72,13 +73,16 @@ def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode
     """
     if align not in (None, "contour"):
         raise ValueError(f"light.align must be contour or null, got {align!r}")
-    lights = network_estimate(subject, checkpoint, soft_decode)
+    with stage("light network"):
+        lights = network_estimate(subject, checkpoint, soft_decode)
     log_stage(f"network ({checkpoint or 'shipped weights'})", lights, subject)
     if align == "contour":
-        lights = align_to_contour(subject, lights)
+        with stage("contour alignment"):
+            lights = align_to_contour(subject, lights)
         log_stage("contour alignment", lights, subject)
     if selfcal is not None:
-        lights = self_calibrate(subject, lights, selfcal)
+        with stage("self-calibration"):
+            lights = self_calibrate(subject, lights, selfcal)
         log_stage("self-calibration", lights, subject)
     return lights
 
@@ -97,10 +101,10 @@ def network_estimate(subject: Subject, checkpoint: str | None, soft_decode: bool
                   intensities[:, None].repeat(1, 3).numpy().astype(np.float32), "estimated")
 
 
-def log_stage(stage: str, lights: Lights, subject: Subject) -> None:
+def log_stage(name: str, lights: Lights, subject: Subject) -> None:
     """One log line per estimation stage, with its error where the subject's lights are known."""
     errors = light_errors(lights, subject)
     known = "".join(f", {label} {errors[key]:.{digits}f}{unit}" for key, label, digits, unit in
                     (("light_dir_mae", "direction error", 2, "°"),
                      ("light_int_err", "intensity error", 3, "")) if key in errors)
-    log.info("lights of %d images after %s%s", subject.n_images, stage, known)
+    log.info("lights of %d images after %s%s", subject.n_images, name, known)

@@ -1,0 +1,150 @@
+"""Can a subject be solved? Checks that run before any method does.
+
+A check raises :class:`~unps.errors.InputError` when no method could give an answer (fewer than
+3 images, lights that do not span 3D, nothing left between black and clipped values) and logs
+a warning when the answer will be worse than the user may expect (few images, nearly coplanar
+lights, many clipped or black values). Images that carry nothing (every object pixel black, or
+every one clipped) are dropped, each named in a warning. ``python -m unps.fit`` records every
+warning in ``metrics.json`` (``warnings``); ``docs/own_photos.md`` says what each means.
+"""
+
+from __future__ import annotations
+
+import logging
+from contextlib import contextmanager
+from typing import Iterator
+
+import numpy as np
+
+from unps.data.subject import Subject
+from unps.errors import InputError
+
+log = logging.getLogger(__name__)
+
+MIN_IMAGES = 3          # three lights fix a normal and an albedo (Woodham)
+FEW_IMAGES = 6          # below this, shadows and highlights leave pixels with fewer than 3 good values
+MAX_CONDITION = 30.0    # σ1/σ3 of the light matrix above which a warning says the lights are nearly coplanar
+MIN_SPAN = 1e-3         # σ3/σ1 below which the lights do not span 3D at all
+TOP_LEVEL = 1 - 1 / 512  # values at or above this fraction of the stack's maximum are clipped
+CLIPPED_WARNING = 0.02  # share of the object's values at the top level that warns
+DARK_WARNING = 0.5      # share of the object's values that are exactly 0 that warns
+
+
+def check_image_count(n: int, source: str) -> None:
+    """Error below :data:`MIN_IMAGES`, warning below :data:`FEW_IMAGES`."""
+    if n < MIN_IMAGES:
+        raise InputError(f"{source}: {n} image{'s' if n != 1 else ''}; photometric stereo needs at least "
+                         f"{MIN_IMAGES} images under different lights")
+    if n < FEW_IMAGES:
+        log.warning("%s: only %d images; with fewer than %d, shadows and highlights leave many pixels "
+                    "with too few usable values and the normals are less accurate", source, n, FEW_IMAGES)
+
+
+def light_condition(directions: np.ndarray) -> float:
+    """σ1/σ3 of the (n, 3) light matrix: 1 for lights spread evenly in 3D, ∞ when they do not
+    span it.
+
+    Example:
+        >>> round(light_condition(np.eye(3)), 3)
+        1.0
+    """
+    s = np.linalg.svd(np.asarray(directions, np.float64), compute_uv=False)
+    return float(s[0] / s[2]) if s.size == 3 and s[2] > MIN_SPAN * s[0] else float("inf")
+
+
+def check_light_span(directions: np.ndarray, source: str, estimated: bool = False) -> float:
+    """Error when given lights do not span 3D, warning when they nearly do not; returns σ1/σ3.
+
+    Estimated lights that do not span 3D are the estimator's failure, not the capture's: they
+    get a warning that says so, and the run goes on.
+    """
+    condition = light_condition(directions)
+    if not np.isfinite(condition) and estimated:
+        log.warning("%s: the estimated lights do not span 3D, so the normals are not determined; the "
+                    "estimate failed on this subject — try light=selfcal, light=gt or other weights", source)
+        return condition
+    if not np.isfinite(condition):
+        raise InputError(f"{source}: the light directions do not span 3D (they are identical or lie in "
+                         f"one plane through the object), so the normals are not determined; "
+                         f"photograph it under lights from at least 3 non-coplanar directions")
+    if condition > MAX_CONDITION:
+        log.warning("%s: the lights are nearly coplanar (condition number %.0f > %.0f); the normals' "
+                    "component along the weakly lit direction is poorly determined", source, condition,
+                    MAX_CONDITION)
+    return condition
+
+
+def value_levels(images: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per image, the share of object pixels clipped (any channel at the top level of the whole
+    stack) and the share that are black (every channel 0).
+
+    Args:
+        images: (n, H, W, 3) as captured; mask: (H, W) bool.
+
+    Returns:
+        clipped, black: (n,) shares in [0, 1].
+    """
+    values = images[:, mask]                                   # (n, m, 3)
+    top = float(values.max())
+    if top <= 0:
+        return np.zeros(len(images)), np.ones(len(images))
+    clipped = (values >= TOP_LEVEL * top).any(-1).mean(1)
+    black = (values <= 0).all(-1).mean(1)
+    return clipped, black
+
+
+def usable_subject(subject: Subject) -> Subject:
+    """The subject without its unusable images, after the checks on counts and values.
+
+    Raises:
+        InputError: fewer than 3 images (before or after dropping), or no usable value at all.
+    """
+    source = f"subject {subject.name!r}"
+    check_image_count(subject.n_images, source)
+    clipped, black = value_levels(subject.observed_images(), subject.mask)
+    if (black == 1).all():
+        raise InputError(f"{source}: every image is black on the object; nothing to solve")
+    empty = (black == 1) | (clipped == 1)
+    for i in np.flatnonzero(empty):
+        log.warning("%s: image %s is %s on the whole object and is left out", source,
+                    subject.filenames[i], "black" if black[i] == 1 else "clipped")
+    if empty.all():
+        raise InputError(f"{source}: every image is clipped on the whole object (over-exposed); "
+                         f"nothing to solve — capture with a shorter exposure")
+    if empty.any():
+        subject = subject.select(np.flatnonzero(~empty))
+        check_image_count(subject.n_images, f"{source} (after leaving out blank images)")
+        clipped, black = clipped[~empty], black[~empty]
+    if clipped.mean() > CLIPPED_WARNING:
+        worst = int(np.argmax(clipped))
+        log.warning("%s: %.0f%% of the object's pixels are clipped at the brightest level (worst: %s, "
+                    "%.0f%%); clipped values are darker than the truth and bend the normals — capture "
+                    "with a shorter exposure or mask them", source, 100 * clipped.mean(),
+                    subject.filenames[worst], 100 * clipped[worst])
+    if black.mean() > DARK_WARNING:
+        log.warning("%s: %.0f%% of the object's pixels are black (0 in every channel); the images are "
+                    "too dark for reliable normals — capture with a longer exposure", source,
+                    100 * black.mean())
+    return subject
+
+
+class _Collect(logging.Handler):
+    def __init__(self, messages: list[str]):
+        super().__init__(logging.WARNING)
+        self.messages = messages
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.messages.append(record.getMessage())
+
+
+@contextmanager
+def collected_warnings() -> Iterator[list[str]]:
+    """Every warning logged under ``unps`` while open, as messages in a list (for metrics.json)."""
+    messages: list[str] = []
+    handler = _Collect(messages)
+    logger = logging.getLogger("unps")
+    logger.addHandler(handler)
+    try:
+        yield messages
+    finally:
+        logger.removeHandler(handler)
