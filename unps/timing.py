@@ -5,9 +5,10 @@
             ...
     seconds   # {"robust initialisation": 0.41}
 
-Stages nest freely and add up when entered again (every step's "normal network" lands in one
+Stages nest freely (a parent's seconds include its children's: "system assembly" holds a
+"robust initialisation") and add up when entered again (every step's "normal network" lands in one
 total); every open recording sees every stage. With no recording open, :func:`stage` costs one attribute lookup, so library code can
-mark its stages unconditionally. ``python -m unps.fit`` records every run into
+mark its stages unconditionally; ``@stage(name)`` also decorates a function. ``python -m unps.fit`` records every run into
 ``metrics.json`` (``stage_seconds``); ``experiments/speed/profile.py`` prints them as a table.
 """
 
@@ -29,7 +30,8 @@ def recording() -> Iterator[dict[str, float]]:
     try:
         yield seconds
     finally:
-        _open.remove(seconds)
+        del _open[next(i for i, totals in enumerate(_open) if totals is seconds)]   # by identity:
+        # two recordings of the same stages compare equal
 
 
 @contextmanager

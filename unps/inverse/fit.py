@@ -173,20 +173,17 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
 
     with stage("read-out"):
         rendering = final_rendering(system, schedule.images_per_step or 16, scale)
-    normals, pseudo_normals = rendering.pop("normals"), rendering.pop("pseudo_normals")
-    bend = interreflection_bend(normals, pseudo_normals, work.mask) if solver else None
+        normals, pseudo_normals = rendering.pop("normals"), rendering.pop("pseudo_normals")
+        bend = interreflection_bend(normals, pseudo_normals, work.mask) if solver else None
+        if factor > 1:
+            coarse_init = system.init_normals[0].permute(1, 2, 0).cpu().numpy()
+            normals = upsample_with_detail(normals, coarse_init, robust_init(cropped, light_directions).normals,
+                                           work.mask, factor)
+        normals, albedo = on_subject_grid(normals, cropped, subject, rendering["light_directions"],
+                                          rendering["light_scales"])
     if bend is not None:
         log.info("interreflections bend the rendered normals by %.2f° on average (%.2f° at most)",
                  bend["mean"], bend["max"])
-    if factor > 1:
-        coarse_init = system.init_normals[0].permute(1, 2, 0).cpu().numpy()
-        with stage("robust initialisation"):
-            fine_init = robust_init(cropped, light_directions).normals
-        with stage("read-out"):
-            normals = upsample_with_detail(normals, coarse_init, fine_init, work.mask, factor)
-    with stage("read-out"):
-        normals, albedo = on_subject_grid(normals, cropped, subject, rendering["light_directions"],
-                                          rendering["light_scales"])
     info = {"fit_resolution": [h, w], "fit_downsample": factor, "fit_steps": schedule.steps,
             "fit_s_per_step": seconds / max(steps_run, 1), "resumed_from_step": resumed_from,
             "parameters": parameters, "facets": solver.n_facets if solver else 0, "preset": preset.name,
@@ -205,8 +202,7 @@ def build_system(work: Subject, light_directions: np.ndarray, preset: Preset, in
     Raises:
         InputError: the images are black on the object.
     """
-    with stage("robust initialisation"):
-        init = robust_init(work, light_directions)
+    init = robust_init(work, light_directions)
     mask = work.mask
     scale = float(np.percentile(work.images[:, mask], 99))    # the white level: images in [0, ~1]
     if not scale > 0:

@@ -20,6 +20,7 @@ import torch
 
 from unps.data.subject import Subject
 from unps.errors import InputError
+from unps.timing import stage
 from unps.solvers.woodham import (Estimate, lambertian_least_squares, normals_from_scaled,
                                   rgb_albedo, to_maps)
 
@@ -117,6 +118,7 @@ def partial_sum_rpca(x: np.ndarray, rank: int = 3, lam: float | None = None,
     return RPCAResult(z.T if transpose else z, e.T if transpose else e, it, residual)
 
 
+@stage("robust initialisation")
 def robust_init(subject: Subject, light_directions: np.ndarray, rank: int = 3,
                 lam: float | None = None, tol: float = 1e-4, max_iter: int = 500) -> Estimate:
     """Normals and albedo from the low-rank part of the gray image matrix.
