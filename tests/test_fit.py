@@ -69,6 +69,11 @@ def test_cli_runs_from_any_folder_and_reports_bad_input(tmp_path):
                    f"hydra.run.dir={tmp_path / 'run'}", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "run" / "metrics.json").is_file()
+    lines = [line.split("] - ", 1)[-1] for line in done.stderr.splitlines() if line.strip()]
+    assert len(lines) == len(set(lines)), "a log line printed twice"
+    assert not any(noise in done.stdout + done.stderr for noise in ("GPU available", "Tip:", "Training:",
+                                                                     "deprecated"))
+    assert "step 30/30: loss" in done.stderr and "outputs written to" in done.stderr
 
     bad = run_cli("subject=diligent", f"subject.root={tmp_path / 'nowhere'}",
                   f"hydra.run.dir={tmp_path / 'bad'}", cwd=tmp_path)

@@ -156,6 +156,9 @@ def run_fit(cfg: DictConfig, seconds: dict[str, float], warnings: list[str]) -> 
 @hydra.main(version_base="1.3", config_path="pkg://unps.conf", config_name="fit")
 @exit_on_bad_input
 def main(cfg: DictConfig) -> None:
+    import lightning.pytorch   # noqa: F401  (it sets its own logger to INFO when imported)
+
+    logging.getLogger("lightning.pytorch").setLevel(logging.WARNING)   # no accelerator lines, no adverts
     fit(cfg)
 
 
