@@ -5,10 +5,11 @@ import pytest
 import torch
 
 from unps.data.analytic import dome_lights, render_lambertian
-from unps.data.diligent import write_diligent
+from unps.data.writer import write_diligent
 from unps.errors import InputError
 from unps.lightnet.brdf import read_neural_brdf
-from unps.lightnet.synthesis import LightDataset, ShapeMaps
+from unps.lightnet.shapes import ShapeMaps
+from unps.lightnet.synthesis import LightDataset
 from unps.synthetic.render import light_dome, mitsuba_bsdf
 
 
@@ -81,7 +82,7 @@ def test_resuming_from_a_missing_or_foreign_checkpoint(tmp_path):
 
 
 def test_black_images_and_non_numeric_noise(sphere):
-    from unps.data.subject import add_noise
+    from unps.data.prepare import add_noise
     from unps.solvers.rpca import partial_sum_rpca, robust_init
 
     black = sphere.replace(images=np.zeros_like(sphere.images))

@@ -8,6 +8,8 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments" / "bad_input"))
 from cases import CASES, run  # noqa: E402
 
+pytestmark = pytest.mark.slow   # 35 command lines, ~4 min
+
 
 @pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
 def test_bad_input_exits_cleanly_and_names_the_culprit(case):

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from conftest import diligent_object
-from unps.data.diligent import read_diligent, write_diligent
+from unps.data.diligent import read_diligent
+from unps.data.writer import write_diligent
 from unps.metrics import normal_metrics
 from unps.solvers.rpca import robust_init
 from unps.solvers.woodham import woodham
@@ -31,10 +32,12 @@ def test_woodham_matches_the_reference_on_ball(ball):
     assert mae(ball, woodham(ball, ball.light_directions)) == pytest.approx(4.29, abs=0.01)
 
 
+@pytest.mark.slow
 def test_robust_init_on_ball_meets_its_target(ball):
     assert mae(ball, robust_init(ball, ball.light_directions)) <= 3.3
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, reference", [("catPNG", 8.77), ("pot1PNG", 10.08)])
 def test_crops_woodham_reference_and_robust_init_below_it(name, reference):
     s = read_diligent(diligent_object(f"pmsData_crop/{name}"))
@@ -43,6 +46,7 @@ def test_crops_woodham_reference_and_robust_init_below_it(name, reference):
     assert mae(s, robust_init(s, s.light_directions)) < woodham_mae
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["catPNG", "pot1PNG"])
 def test_reading_the_crops_as_truncated_lowers_both_errors(name):
     rounded = read_diligent(diligent_object(f"pmsData_crop/{name}"))

@@ -9,7 +9,8 @@ from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
 from hydra.core.override_parser.overrides_parser import OverridesParser
 
 from unps.data.analytic import render_lambertian
-from unps.data.diligent import find_diligent_object, read_diligent, read_diligent_object, write_diligent
+from unps.data.diligent import find_diligent_object, read_diligent, read_diligent_object
+from unps.data.writer import write_diligent
 from unps.errors import InputError
 from unps.fit import fit
 from unps.io.images import write_png8
@@ -246,6 +247,7 @@ def test_notebook_is_committed_without_outputs():
     assert "parameters" in code[0].metadata.get("tags", [])
 
 
+@pytest.mark.slow
 def test_notebook_runs_at_tiny_size(tmp_path):
     from nbclient import NotebookClient
 

@@ -7,7 +7,7 @@ import pytest
 from hydra import compose, initialize_config_module
 
 from unps.data.analytic import render_lambertian
-from unps.data.diligent import write_diligent
+from unps.data.writer import write_diligent
 from unps.errors import InputError
 from unps.fit import fit
 
@@ -64,6 +64,7 @@ def run_cli(*args, cwd):
                           text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_cli_runs_from_any_folder_and_reports_bad_input(tmp_path):
     done = run_cli("subject=lambertian", "subject.size=24", "preset.steps=30", "preset.lr_drop_at=27",
                    f"hydra.run.dir={tmp_path / 'run'}", cwd=tmp_path)
@@ -87,6 +88,7 @@ def test_cli_runs_from_any_folder_and_reports_bad_input(tmp_path):
     (["subject=folder", "method=woodham"], "this subject needs subject.root=…"),
     (["subject=lambertian", "method=woodham", "light=gt", "noise=abc"], "noise must be a number"),
 ])
+@pytest.mark.slow
 def test_cli_names_a_missing_or_malformed_setting(tmp_path, args, culprit):
     bad = run_cli(*args, f"hydra.run.dir={tmp_path / 'bad'}", cwd=tmp_path)
     assert bad.returncode == 2 and culprit in bad.stdout + bad.stderr
@@ -94,6 +96,7 @@ def test_cli_names_a_missing_or_malformed_setting(tmp_path, args, culprit):
     assert not (tmp_path / "bad" / "metrics.json").exists()
 
 
+@pytest.mark.slow
 def test_cli_multirun_sweeps_methods(tmp_path):
     done = run_cli("-m", "method=woodham,rpca", "light=gt", "subject=lambertian", "subject.size=24",
                    f"hydra.sweep.dir={tmp_path / 'sweep'}", cwd=tmp_path)
@@ -103,6 +106,7 @@ def test_cli_multirun_sweeps_methods(tmp_path):
     assert methods == ["rpca", "woodham"]
 
 
+@pytest.mark.slow
 def test_a_killed_sweep_reruns_to_the_end_and_a_finished_one_reruns_cleanly(tmp_path):
     """Kill a two-job unps sweep after its first checkpoint; the same command finishes it (the
     killed job resumes, the other runs); run once more, every job reads out its finished fit."""
@@ -133,6 +137,7 @@ def test_a_killed_sweep_reruns_to_the_end_and_a_finished_one_reruns_cleanly(tmp_
     assert runs[0]["resumed_from_step"] == 200 == runs[1]["resumed_from_step"]
 
 
+@pytest.mark.slow
 def test_help_lists_the_groups_that_apply_and_examples(tmp_path):
     done = run_cli("--help", cwd=tmp_path)
     assert done.returncode == 0

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from unps.data.analytic import height_field
-from unps.data.subject import Frame
+from unps.grid import Frame
 from unps.geometry import depth_to_mesh, integrate_normals
 from unps.io.mesh import write_ply
 

@@ -10,8 +10,8 @@ from hydra import compose, initialize_config_module
 from unps.data.analytic import render_lambertian
 from unps.errors import Diverged, InputError
 from unps.fit import fit
-from unps.inverse.fit import (Preset, interreflection_bend, neural_inverse_rendering, upsample_normals,
-                              upsample_with_detail, working_factor)
+from unps.inverse.fit import Preset, interreflection_bend, neural_inverse_rendering
+from unps.inverse.grids import unclipped, upsample_normals, upsample_with_detail, working_factor
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet, normal_net_input, shading, specular_map
 from unps.inverse.system import InverseRendering
@@ -161,7 +161,7 @@ def test_detail_is_added_to_the_upsampled_fit():
 def test_a_fit_on_a_coarser_working_grid_returns_full_resolution_normals(sphere):
     estimate = neural_inverse_rendering(sphere, sphere.light_directions,
                                         {**TINY, "max_pixels": sphere.mask.sum() // 3}, NAYAR)
-    assert estimate.rendering.info["fit_downsample"] == 2
+    assert estimate.info["fit_downsample"] == 2
     assert estimate.normals.shape == sphere.normals.shape
     np.testing.assert_allclose(np.linalg.norm(estimate.normals[sphere.mask], axis=-1), 1, atol=1e-5)
     assert not estimate.normals[~sphere.mask].any()
@@ -269,6 +269,41 @@ def test_interreflection_off_and_in_memory_fits(sphere):
                                             {**NAYAR, "enabled": enabled})
         mae = angular_error(estimate.normals, sphere.normals)[sphere.mask].mean()
         assert estimate.normals.shape == sphere.normals.shape and mae < 30
-        info = estimate.rendering.info
+        info = estimate.info
         assert info["interreflection"] is enabled
         assert (info["interreflection_bend_deg"] >= 0) if enabled else info["interreflection_bend_deg"] is None
+
+
+def test_clipped_values_are_left_out_of_the_loss():
+    """A value marked unusable is no target: the loss barely moves however wrong it is (it still
+    reaches the reflectance network as an input); marking none is the same loss as no marks."""
+    system, subject = sphere_system(prior_weight=0.0)
+    usable = torch.ones(12, 1, *subject.mask.shape)
+    usable[:, :, 8:14, 8:14] = 0
+    marked, _ = sphere_system(prior_weight=0.0)
+    marked.load_state_dict(system.state_dict())
+    marked.usable = usable
+    all_marked, _ = sphere_system(prior_weight=0.0)
+    all_marked.load_state_dict(system.state_dict())
+    all_marked.usable = torch.ones_like(usable)
+
+    def loss(s):
+        torch.manual_seed(3)
+        with torch.no_grad(), pytest.warns(UserWarning, match="self.log"):
+            return s.training_step(None, 0).item()
+
+    assert loss(all_marked) == loss(system)
+    before = loss(marked)
+    marked.images[:, :, 8:14, 8:14] = 50.0          # what a clipped highlight can no longer tell
+    assert abs(loss(marked) - before) < 0.01 * before
+    system.images[:, :, 8:14, 8:14] = 50.0
+    assert loss(system) > 2 * before
+
+
+def test_clipped_values_are_found_on_the_working_grid():
+    subject = render_lambertian("sphere", size=24, n_lights=12, seed=1)
+    top = np.percentile(subject.images[:, subject.mask], 95)
+    clipped = subject.replace(images=np.minimum(subject.images, top))
+    usable = unclipped(clipped.crop_to_mask(4), 2)
+    assert usable is not None and 0 < (usable == 0).mean() < 0.5
+    assert unclipped(subject.crop_to_mask(4), 1) is None

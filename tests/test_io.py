@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import scipy.io
 
-from unps.data.diligent import read_diligent, read_folder, write_diligent
+from unps.data.diligent import read_diligent, read_folder
+from unps.data.writer import write_diligent
 from unps.errors import InputError
 from unps.io.files import atomic_path
 from unps.io.images import read_image, read_mask, srgb_to_linear
@@ -141,10 +142,10 @@ def test_writer_refuses_to_overwrite_and_leaves_nothing_half_written(tmp_path, s
     with pytest.raises(FileExistsError):
         write_diligent(sphere, tmp_path / "obj")
 
-    import unps.data.diligent as diligent
+    import unps.data.writer as writer
     def failing(path, rgb):
         raise OSError("disk full")
-    monkeypatch.setattr(diligent, "write_png16", failing)
+    monkeypatch.setattr(writer, "write_png16", failing)
     with pytest.raises(OSError, match="disk full"):
         write_diligent(sphere, tmp_path / "new")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["obj"]

@@ -12,7 +12,8 @@ from unps.lightnet.brdf import (AnalyticBRDF, MERL_SHAPE, half_diff_angles, read
                                 read_neural_brdf)
 from unps.lightnet.estimate import estimate_lights, network_input
 from unps.lightnet.network import LightNet
-from unps.lightnet.synthesis import LightDataset, cast_shadows, maps_from_depth
+from unps.lightnet.shapes import cast_shadows, maps_from_depth
+from unps.lightnet.synthesis import LightDataset
 from unps.lightnet.system import load_lightnet
 from unps.train import train
 
@@ -245,7 +246,7 @@ def test_missing_or_foreign_weights_are_reported(tmp_path):
 def test_mesh_views_give_normal_and_depth_maps(tmp_path):
     import trimesh
 
-    from unps.lightnet.synthesis import mesh_views
+    from unps.lightnet.shapes import mesh_views
 
     trimesh.creation.icosphere(subdivisions=3).export(tmp_path / "ball.ply")
     (tmp_path / "notes.txt").write_text("not a mesh")
@@ -263,7 +264,7 @@ def test_mesh_views_give_normal_and_depth_maps(tmp_path):
 
 
 def test_material_bank_families_and_errors(tmp_path):
-    from unps.lightnet.synthesis import MaterialBank
+    from unps.lightnet.materials import MaterialBank
 
     with pytest.raises(InputError, match="merl has weight 1 but its folder"):
         MaterialBank(merl_dir=str(tmp_path / "nowhere"), merl=1)

@@ -3,7 +3,9 @@ import logging
 import numpy as np
 import pytest
 
-from unps.data.subject import Frame, Subject, parse_indices, prepare
+from unps.data.prepare import parse_indices, prepare
+from unps.data.subject import Subject
+from unps.grid import Frame
 from unps.errors import InputError
 
 

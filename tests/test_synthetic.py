@@ -10,7 +10,7 @@ from hydra.utils import instantiate
 
 import unps.synthetic.scenes as scenes
 from unps.data.analytic import render_lambertian
-from unps.data.subject import add_noise
+from unps.data.prepare import add_noise
 from unps.errors import InputError
 from unps.fit import fit
 from unps.synthetic import shapes
@@ -146,6 +146,7 @@ def run(module, *args, cwd):
                           text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_render_cli_and_unknown_subjects(tmp_path):
     done = run("unps.render", "subject=Golf-ball", *TINY, f"paths.cache_dir={tmp_path / 'c'}",
                f"hydra.run.dir={tmp_path / 'run'}", cwd=tmp_path)

@@ -8,149 +8,20 @@
     python -m unps.fit -m method=woodham,rpca subject=diligent subject.root=…
 
 Outputs land in Hydra's run folder (``hydra.run.dir=…`` moves it); see
-:func:`unps.io.outputs.write_fit_outputs`.
+:func:`unps.pipeline.outputs.write_fit_outputs`.
 """
 
 from __future__ import annotations
 
 import logging
-import time
-from functools import partial
-from pathlib import Path
-from typing import Any
 
 import hydra
-from hydra.utils import instantiate
-import numpy as np
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
-from unps.allocator import keep_freed_memory
-from unps.checks import check_light_span, collected_warnings, usable_subject
-from unps.data.subject import add_noise
-from unps.errors import InputError, exit_on_bad_input
-from unps.geometry import integrate_normals
-from unps.lights import Lights, ground_truth, light_errors, with_lights
-from unps.metrics import angular_error, normal_metrics
-from unps.threads import set_fit_threads
-from unps.timing import recording, stage
+from unps.errors import exit_on_bad_input
+from unps.pipeline import fit
 
-log = logging.getLogger("unps.fit")
-
-
-def launcher_config() -> dict | None:
-    """The Hydra launcher's settings when this fit is one job of a multirun, else None."""
-    from hydra.core.hydra_config import HydraConfig
-    from hydra.types import RunMode
-
-    if not HydraConfig.initialized() or HydraConfig.get().mode != RunMode.MULTIRUN:
-        return None
-    return OmegaConf.to_container(HydraConfig.get().launcher, resolve=True)
-
-
-def build(node: DictConfig) -> tuple[str, Any]:
-    """Instantiate a config-group node; its ``name`` labels it and is not passed to the target
-    (nor is ``refine``, which ``light=refine`` sets for the method rather than the estimator).
-
-    Nodes are partial (``_partial_: true``): the callable they give raises its own errors
-    when called, rather than Hydra's wrapped instantiation error.
-    """
-    spec = OmegaConf.to_container(node, resolve=True)
-    name = spec.pop("name")
-    spec.pop("refine", None)
-    return name, instantiate(spec)
-
-
-def fit(cfg: DictConfig) -> dict:
-    """Run one method on one subject and write every output into ``cfg.paths.output_dir``.
-
-    The subject is read and validated and the lights resolved before anything is written.
-
-    Returns:
-        The metrics also written to ``metrics.json``, with the seconds of each stage so far
-        (``stage_seconds``, :mod:`unps.timing`) and every warning logged (``warnings``,
-        :mod:`unps.checks`).
-    """
-    with recording() as seconds, collected_warnings() as warnings:
-        return run_fit(cfg, seconds, warnings)
-
-
-def run_fit(cfg: DictConfig, seconds: dict[str, float], warnings: list[str]) -> dict:
-    """:func:`fit`'s body; ``seconds`` and ``warnings`` fill as it goes."""
-    from lightning import seed_everything
-
-    from unps.io.outputs import write_fit_outputs
-
-    seed_everything(cfg.seed, workers=True, verbose=False)
-    threads, source = set_fit_threads(cfg.get("threads"), launcher_config())
-    keep_freed_memory()
-    out = Path(cfg.paths.output_dir)
-    start = time.perf_counter()
-    missing = sorted(OmegaConf.missing_keys(cfg.subject))
-    if missing:
-        raise InputError("this subject needs " + ", ".join(f"{key}=…" for key in missing)
-                         + " on the command line (e.g. subject.root=<folder of images>)")
-    with stage("reading"):
-        subject = instantiate(cfg.subject, _partial_=True)()   # called here so errors reach the user
-    subject = usable_subject(subject)
-    subject, noise_reference = add_noise(subject, cfg.noise, seed=cfg.seed)
-    original = subject
-    light_name, light_source = build(cfg.light)
-    method_name, method = build(cfg.method)
-    refine = bool(cfg.light.get("refine", False))
-    if refine and method_name != "unps":
-        raise InputError(f"light=refine refines the lights inside the neural inverse rendering, "
-                         f"so it needs method=unps, not method={method_name}")
-    with stage("lights"):
-        lights = light_source(subject)
-    condition = check_light_span(lights.directions, f"the lights of {subject.name!r} ({light_name})",
-                                 estimated=lights.source != "gt")
-    light_metrics = {}
-    if lights.source != "gt":
-        light_metrics = light_errors(lights, subject)
-        subject = with_lights(subject, lights)
-    if method_name == "unps":
-        method = partial(method, refine_lights=refine, output_dir=out)
-    h, w = subject.resolution
-    log.info("%s: %d images, %d×%d pixels (%d on the object), read in %.1f s; lights: %s; "
-             "method: %s; %d torch threads (%s)", subject.name, subject.n_images, w, h,
-             subject.mask.sum(), time.perf_counter() - start, light_name, method_name, threads, source)
-
-    start = time.perf_counter()
-    with stage("method"):
-        estimate = method(subject, lights.directions)
-    with stage("depth"):
-        depth = integrate_normals(estimate.normals, subject.mask)
-    runtime = time.perf_counter() - start
-    if refine:
-        rendering = estimate.rendering
-        intensities = (lights.intensities if lights.intensities is not None
-                       else np.ones_like(lights.directions)) * rendering.light_scales[:, None]
-        lights = Lights(rendering.light_directions, intensities.astype(np.float32), "refined")
-        light_metrics = light_errors(lights, original)
-        if light_metrics:
-            log.info("refined lights: %s", ", ".join(f"{k} {v:.3f}" for k, v in light_metrics.items()))
-
-    metrics = {"study": cfg.get("study"), "seed": cfg.seed,
-               "subject": subject.name, "method": method_name, "light": light_name,
-               "noise": cfg.noise, "noise_reference": noise_reference,
-               "runtime_s": runtime, "n_images": subject.n_images, "resolution": [h, w],
-               **light_metrics}
-    if estimate.rendering is not None:
-        metrics.update(estimate.rendering.info)
-    error = None
-    if subject.normals is not None:
-        error = angular_error(estimate.normals, subject.normals)
-        metrics.update(normal_metrics(estimate.normals, subject.normals, subject.mask))
-        log.info("normal error: mean %.2f°, median %.2f°, %.1f%% under 11.25°, slant bias %+.2f° "
-                 "(%.2f s)", metrics["normal_mae"], metrics["normal_median"], 100 * metrics["acc_11_25"],
-                 metrics["slant_bias"], runtime)
-    true_lights = ground_truth(original) if lights.source != "gt" and original.calibrated else None
-    metrics["light_condition"] = condition if np.isfinite(condition) else None
-    metrics["warnings"] = list(warnings)
-    metrics["stage_seconds"] = dict(seconds)
-    with stage("writing"):
-        write_fit_outputs(out, subject, estimate, depth, lights, metrics, error, true_lights)
-    return metrics
+__all__ = ["fit", "main"]
 
 
 @hydra.main(version_base="1.3", config_path="pkg://unps.conf", config_name="fit")

@@ -11,7 +11,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import spsolve
 
-from unps.data.subject import Frame
+from unps.grid import Frame
 
 
 def integrate_normals(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:

@@ -15,8 +15,8 @@ def angular_error(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         (...,) degrees in [0, 180].
 
     Example:
-        >>> angular_error(np.array([0, 0, 1.0]), np.array([0, 1, 1.0]))
-        array(45.)
+        >>> round(float(angular_error(np.array([0, 0, 1.0]), np.array([0, 1, 1.0]))), 6)
+        45.0
     """
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)

@@ -7,9 +7,10 @@
 
 Stages nest freely (a parent's seconds include its children's: "system assembly" holds a
 "robust initialisation") and add up when entered again (every step's "normal network" lands in one
-total); every open recording sees every stage. With no recording open, :func:`stage` costs one attribute lookup, so library code can
-mark its stages unconditionally; ``@stage(name)`` also decorates a function. ``python -m unps.fit`` records every run into
-``metrics.json`` (``stage_seconds``); ``experiments/speed/profile.py`` prints them as a table.
+total); every open recording sees every stage. With no recording open, :func:`stage` costs one
+attribute lookup, so library code can mark its stages unconditionally; ``@stage(name)`` also
+decorates a function. ``python -m unps.fit`` records every run into ``metrics.json``
+(``stage_seconds``); ``experiments/speed/stages.py`` prints them as a table.
 """
 
 from __future__ import annotations

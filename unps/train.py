@@ -4,7 +4,7 @@
     python -m unps.train recipe=paper              # the paper's sizes (a GPU)
     python -m unps.train ckpt_path=<run>/checkpoints/last.ckpt   # resume, with that run's config
 
-Data are rendered on the fly (``unps.lightnet.synthesis``); checkpoints, TensorBoard logs
+Data are rendered on the fly (:class:`unps.lightnet.data.LightData`); checkpoints, TensorBoard logs
 and ``metrics.json`` land in the run folder.
 """
 
@@ -22,25 +22,6 @@ from omegaconf import DictConfig, OmegaConf
 from unps.errors import InputError, exit_on_bad_input
 
 log = logging.getLogger("unps.train")
-
-
-def datasets(cfg: DictConfig, start_step: int = 0):
-    """Training and held-out validation sets of one run config; training starts at ``start_step``."""
-    from unps.lightnet.synthesis import LightDataset, MaterialBank, mesh_views
-
-    recipe, data = cfg.recipe, cfg.data
-    meshes = (mesh_views(data.meshes_dir, recipe.resolution, data.views_per_mesh, cfg.seed)
-              if data.meshes_dir else None)
-    common = dict(resolution=recipe.resolution, images=recipe.images,
-                  lights_per_shape=data.lights_per_shape, max_zenith_deg=data.max_zenith_deg,
-                  materials=MaterialBank(**data.materials), meshes=meshes,
-                  mesh_fraction=data.mesh_fraction, texture=data.texture,
-                  perturbation=data.perturbation, saturation=data.saturation)
-    done = start_step * recipe.batch_size
-    train = LightDataset(length=max(recipe.max_steps * recipe.batch_size - done, recipe.batch_size),
-                         seed=cfg.seed, offset=done, **common)
-    val = LightDataset(length=recipe.val_samples, seed=cfg.seed + 1_000_003, **common)
-    return train, val
 
 
 def initial_weights(path: str, cfg: DictConfig):
@@ -61,10 +42,9 @@ def train(cfg: DictConfig) -> dict:
     import lightning as L
     from lightning.pytorch.callbacks import LearningRateMonitor, ModelCheckpoint
     from lightning.pytorch.loggers import TensorBoardLogger
-    from torch.utils.data import DataLoader
-
     from unps.io.files import write_json
     from unps.lightnet.callbacks import LightSamples
+    from unps.lightnet.data import LightData
     from unps.lightnet.system import LightEstimation
 
     out = Path(cfg.paths.output_dir)
@@ -82,9 +62,8 @@ def train(cfg: DictConfig) -> dict:
                               {"paths": {"output_dir": str(out)}, "ckpt_path": str(ckpt)})
     L.seed_everything(cfg.seed, workers=True, verbose=False)
     torch.set_num_threads(cfg.recipe.threads or torch.get_num_threads())
-    train_set, val_set = datasets(cfg, start_step)
-    loader = dict(batch_size=cfg.recipe.batch_size, num_workers=cfg.recipe.workers,
-                  persistent_workers=cfg.recipe.workers > 0)
+    data = LightData(cfg.recipe, cfg.data, cfg.seed, start_step)
+    data.setup("fit")   # errors in the data settings stop the run before the trainer starts
     net = instantiate(cfg.light)
     if cfg.init_weights and not cfg.ckpt_path:
         net = initial_weights(cfg.init_weights, cfg)
@@ -103,8 +82,7 @@ def train(cfg: DictConfig) -> dict:
         accelerator="auto", devices=1, log_every_n_steps=cfg.recipe.log_every,
         enable_progress_bar=True, deterministic=False)
     start = time.perf_counter()
-    trainer.fit(system, DataLoader(train_set, **loader), DataLoader(val_set, **loader),
-                ckpt_path=cfg.ckpt_path or None)
+    trainer.fit(system, datamodule=data, ckpt_path=cfg.ckpt_path or None)
     metrics = {k: float(v) for k, v in trainer.callback_metrics.items()}
     metrics.update(train_seconds=time.perf_counter() - start, steps=trainer.global_step)
     write_json(out / "metrics.json", metrics)

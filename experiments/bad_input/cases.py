@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from unps.data.analytic import render_lambertian
-from unps.data.diligent import write_diligent
+from unps.data.writer import write_diligent
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "bad_input.md"
 WOODHAM = ["method=woodham"]
@@ -130,7 +130,8 @@ CASES = [
     Case("no images", "a folder without image files",
          lambda root: folder_args(root, *WOODHAM), 2, "no image files"),
     Case("corrupt image", "a `.png` that is not an image",
-         lambda root: folder_args(edit("002.png", "not a picture")(root), "light=gt", *WOODHAM), 2, "002.png"),
+         lambda root: folder_args(edit("002.png", "not a picture")(root), "light=gt", *WOODHAM),
+         2, "002.png"),
     Case("mask wrong size", "a mask of another size than the images",
          lambda root: _mask_of(root, np.full((20, 20), 255, np.uint8)), 2, "mask.png"),
     Case("mask empty", "an all-black mask",
@@ -244,7 +245,8 @@ def table(outcomes: list[Outcome]) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--only", default="", help="run only the cases whose name contains this")
     parser.add_argument("--jobs", type=int, default=2)
     args = parser.parse_args()

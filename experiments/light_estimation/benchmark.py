@@ -3,8 +3,10 @@
     python experiments/light_estimation/benchmark.py [--checkpoint PATH] [--data ../shared/data]
     python experiments/light_estimation/benchmark.py --only diligent --renders Face Tablet1 Vase
 
-1. DiLiGenT (ball 16-bit, cat and pot1 crops, all 96 images): direction MAE and scale-invariant
-   intensity error of the lights as the network gives them, the direction MAE once aligned to
+1. DiLiGenT (ball 16-bit, cat and pot1 crops, all 96 images): direction MAE of the lights as
+   the network gives them in one pass (the default) and averaged over the eight symmetries of
+   the square (``light.symmetric=true``), the median spread of those eight estimates, the
+   scale-invariant intensity error (one pass), the direction MAE once aligned to
    the occluding contour (``light.align=contour``, the default of ``light=estimated``), and the
    normal MAE of the robust initialisation with the network's, the aligned and the
    ground-truth lights.
@@ -22,6 +24,7 @@ import argparse
 import time
 from pathlib import Path
 
+import numpy as np
 import torch
 from omegaconf import OmegaConf
 
@@ -31,7 +34,8 @@ from unps.lights import light_errors
 from unps.lights import with_lights
 from unps.lightnet.bins import decode_lights, encode_lights
 from unps.lightnet.estimate import estimate_lights
-from unps.lightnet.synthesis import LightDataset, MaterialBank
+from unps.lightnet.materials import MaterialBank
+from unps.lightnet.synthesis import LightDataset
 from unps.lightnet.system import SHIPPED, batch_light_errors, build_net, load_lightnet
 from unps.metrics import normal_metrics
 from unps.lights.contour import align_to_contour
@@ -43,8 +47,8 @@ OBJECTS = ("ball", "cat", "pot1")
 
 def diligent(data: Path, checkpoint, quantization: str = "auto"):
     """``quantization``: ``auto`` reads the 8-bit crops as ``floor``, the way they were made."""
-    print("DiLiGenT, all 96 images        dir MAE   int err   aligned dir MAE   RPCA(est) °  "
-          "RPCA(aligned) °  RPCA(GT) °")
+    print("DiLiGenT, all 96 images   1-pass dir MAE   8-sym dir MAE   spread   int err   aligned dir MAE   "
+          "RPCA(est) °  RPCA(aligned) °  RPCA(GT) °")
     for name in OBJECTS:
         try:
             subject = read_diligent_object(data / "DiLiGenT", name, quantization=quantization)
@@ -52,13 +56,17 @@ def diligent(data: Path, checkpoint, quantization: str = "auto"):
             print(f"{name:<6} skipped: {e}")
             continue
         lights = estimate_lights(subject, checkpoint, align=None)
+        averaged = estimate_lights(subject, checkpoint, symmetric=True, align=None)
         aligned = align_to_contour(subject, lights)
         errors = light_errors(lights, subject)
         est = robust_init(with_lights(subject, lights), lights.directions)
         est_aligned = robust_init(with_lights(subject, aligned), aligned.directions)
         gt = robust_init(subject, subject.light_directions)
         mae = lambda e: normal_metrics(e.normals, subject.normals, subject.mask)["normal_mae"]  # noqa: E731
-        print(f"{name:<30} {errors['light_dir_mae']:>7.2f}° {errors['light_int_err']:>9.3f} "
+        print(f"{name:<25} {errors['light_dir_mae']:>15.2f}° "
+              f"{light_errors(averaged, subject)['light_dir_mae']:>10.2f}° "
+              f"{np.median(averaged.spread_deg):>7.1f}° "
+              f"{errors['light_int_err']:>9.3f} "
               f"{light_errors(aligned, subject)['light_dir_mae']:>16.2f}° {mae(est):>12.2f} "
               f"{mae(est_aligned):>16.2f} {mae(gt):>11.2f}", flush=True)
 
@@ -68,13 +76,16 @@ def renders(names: list[str], checkpoint):
     from hydra import compose, initialize_config_module
     from hydra.utils import instantiate
 
-    print("rendered subject               dir MAE   aligned dir MAE")
+    print("rendered subject          1-pass dir MAE   8-sym dir MAE   spread   aligned dir MAE")
     with initialize_config_module("unps.conf", version_base=None):
         for name in names:
             subject = instantiate(compose("fit", overrides=[f"subject={name}"]).subject, _partial_=True)()
             lights = estimate_lights(subject, checkpoint, align=None)
+            averaged = estimate_lights(subject, checkpoint, symmetric=True, align=None)
             aligned = align_to_contour(subject, lights)
-            print(f"{name:<30} {light_errors(lights, subject)['light_dir_mae']:>7.2f}° "
+            print(f"{name:<25} {light_errors(lights, subject)['light_dir_mae']:>15.2f}° "
+                  f"{light_errors(averaged, subject)['light_dir_mae']:>10.2f}° "
+                  f"{np.median(averaged.spread_deg):>7.1f}° "
                   f"{light_errors(aligned, subject)['light_dir_mae']:>16.2f}°", flush=True)
 
 

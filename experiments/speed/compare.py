@@ -58,7 +58,8 @@ def run(source: Path, subject: str, overrides: list[str], run_dir: Path) -> dict
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--before", required=True, help="git revision to compare with")
     parser.add_argument("--subjects", nargs="+", default=["ball", "cat", "pot1"])
     parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE")

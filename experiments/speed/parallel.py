@@ -24,7 +24,8 @@ from stages import DILIGENT, machine  # noqa: E402
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--subject", default="ball")
     parser.add_argument("--steps", type=int, default=200)
     parser.add_argument("--out", type=Path, default=Path("runs/speed-parallel"))
@@ -38,7 +39,8 @@ def main() -> None:
     subprocess.run([*fit, "-m", *common, "hydra/launcher=local", "hydra.launcher.n_jobs=2", "seed=0,1",
                     f"hydra.sweep.dir={args.out / 'pair'}"], check=True, capture_output=True)
     alone = json.loads((args.out / "alone" / "metrics.json").read_text())["fit_s_per_step"]
-    pair = [json.loads(p.read_text())["fit_s_per_step"] for p in sorted((args.out / "pair").glob("*/metrics.json"))]
+    pair = [json.loads(p.read_text())["fit_s_per_step"]
+            for p in sorted((args.out / "pair").glob("*/metrics.json"))]
     print(f"machine: {machine()}")
     print(f"{args.subject}, fast preset, {args.steps} steps: alone {alone:.3f} s/step; two at once "
           + ", ".join(f"{p:.3f} s/step ({p / alone:.2f}×)" for p in pair))

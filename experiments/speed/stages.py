@@ -80,9 +80,11 @@ def table(results: list[dict]) -> str:
     for stage in PER_STEP:
         row(f"… {stage} (ms/step)",
             [f"{1000 * r['seconds'].get(stage, 0.0) / max(r['steps'], 1):.1f}" for r in results])
-    row("… loop and loss (ms/step)",
-        [f"{1000 * (r['seconds'].get('steps', 0.0) - sum(r['seconds'].get(s, 0.0) for s in PER_STEP)) / max(r['steps'], 1):.1f}"
-         for r in results])
+    def loop_and_loss(r: dict) -> float:
+        rest = r["seconds"].get("steps", 0.0) - sum(r["seconds"].get(s, 0.0) for s in PER_STEP)
+        return 1000 * rest / max(r["steps"], 1)
+
+    row("… loop and loss (ms/step)", [f"{loop_and_loss(r):.1f}" for r in results])
     row("**total (s)**", [f"**{r['wall_s']:.1f}**" for r in results])
     row("normal MAE (°)", [f"{r['normal_mae']:.2f}" if r["normal_mae"] is not None else "–" for r in results])
     row("working grid", ["×".join(map(str, r["grid"][::-1])) if r["grid"] else "–" for r in results])
@@ -90,7 +92,8 @@ def table(results: list[dict]) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--subjects", nargs="+", default=["ball", "cat", "pot1"])
     parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
                         help="overrides for every fit (e.g. preset.steps=200)")

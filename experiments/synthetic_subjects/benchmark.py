@@ -26,7 +26,7 @@ from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
 from unps.data.diligent import read_diligent
-from unps.data.subject import prepare
+from unps.data.prepare import prepare
 from unps.io.images import write_png8
 from unps.metrics import normal_metrics
 from unps.render import preview

@@ -8,96 +8,14 @@ from the surface to the light.
 from __future__ import annotations
 
 import dataclasses
-import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from unps.data.lights import check_light_directions, check_light_intensities
 from unps.errors import InputError
-
-log = logging.getLogger(__name__)
-
-UNIT_TOLERANCE = 1e-3
-
-
-@dataclass(frozen=True)
-class Frame:
-    """Where a subject's pixel grid lies in the images it was read from.
-
-    Subject pixel ``(r, c)`` covers source rows ``top + r*step … top + r*step + step - 1``
-    and the matching columns; ``step`` is the downsampling factor.
-    """
-
-    source_size: tuple[int, int]
-    top: int = 0
-    left: int = 0
-    step: int = 1
-
-    def source_coords(self, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Centres of subject pixels in source pixel coordinates (row, col), as floats."""
-        centre = (self.step - 1) / 2
-        return (self.top + np.asarray(rows) * self.step + centre,
-                self.left + np.asarray(cols) * self.step + centre)
-
-    def to_dict(self) -> dict:
-        return {"source_size": list(self.source_size), "top": self.top, "left": self.left,
-                "step": self.step}
-
-    @classmethod
-    def from_dict(cls, d: dict) -> Frame:
-        return cls(tuple(int(v) for v in d["source_size"]), int(d["top"]), int(d["left"]),
-                   int(d["step"]))
-
-
-def check_light_directions(directions, n_images: int, source: str) -> np.ndarray:
-    """Validate light directions and return them as unit float32 vectors.
-
-    Args:
-        directions: (n, 3) surface-to-light directions in the unps frame.
-        n_images: the number of images they must match.
-        source: the file or subject named in error messages.
-
-    Returns:
-        (n, 3) float32 unit vectors. Non-unit rows are normalised with a warning.
-
-    Raises:
-        InputError: wrong shape, NaN/Inf, or a zero-length direction.
-    """
-    d = np.asarray(directions, dtype=np.float64)
-    if d.ndim == 1 and d.size == 3:
-        d = d[None]
-    if d.shape != (n_images, 3):
-        raise InputError(f"{source}: expected {n_images} light directions of 3 values (one per "
-                         f"image), got an array of shape {d.shape}")
-    bad = ~np.isfinite(d).all(axis=1)
-    if bad.any():
-        raise InputError(f"{source}: light direction {int(np.argmax(bad))} is not finite: "
-                         f"{d[bad][0].tolist()}")
-    norm = np.linalg.norm(d, axis=1)
-    if (norm < 1e-8).any():
-        raise InputError(f"{source}: light direction {int(np.argmax(norm < 1e-8))} has zero length")
-    off = np.abs(norm - 1) > UNIT_TOLERANCE
-    if off.any():
-        log.warning("%s: %d light directions are not unit length (e.g. row %d, |l| = %.4f); "
-                    "normalising them", source, off.sum(), int(np.argmax(off)), norm[off][0])
-    return (d / norm[:, None]).astype(np.float32)
-
-
-def check_light_intensities(intensities, n_images: int, source: str) -> np.ndarray:
-    """Validate RGB light intensities: (n, 3), or (n,) shared by RGB; finite and > 0."""
-    e = np.asarray(intensities, dtype=np.float64)
-    if e.ndim == 1 and e.shape == (n_images,):
-        e = np.repeat(e[:, None], 3, axis=1)
-    if e.shape != (n_images, 3):
-        raise InputError(f"{source}: expected {n_images} light intensities of 3 (RGB) values, "
-                         f"got an array of shape {e.shape}")
-    bad = ~(np.isfinite(e) & (e > 0)).all(axis=1)
-    if bad.any():
-        raise InputError(f"{source}: light intensities must be finite and > 0; row "
-                         f"{int(np.argmax(bad))} is {e[bad][0].tolist()}")
-    return e.astype(np.float32)
-
+from unps.grid import Frame, block_mean
 
 @dataclass(frozen=True, eq=False)
 class Subject:
@@ -192,10 +110,6 @@ class Subject:
     def calibrated(self) -> bool:
         return self.light_directions is not None
 
-    def gray(self) -> np.ndarray:
-        """(n, H, W) float32: mean of the RGB channels."""
-        return self.images.mean(axis=-1)
-
     def observed_images(self) -> np.ndarray:
         """(n, H, W, 3) float32: the images as captured, before division by intensities."""
         if self.light_intensities is None:
@@ -265,102 +179,3 @@ class Subject:
 def _index(a: np.ndarray | None, index) -> np.ndarray | None:
     """``a[index]``, or None for a missing (None) array."""
     return None if a is None else a[index]
-
-
-def block_mean(values: np.ndarray, mask: np.ndarray, factor: int) -> tuple[np.ndarray, np.ndarray]:
-    """Average (H, W, C) values over the object's pixels in factor×factor blocks.
-
-    Blocks with no object pixel get the plain mean. The grid is padded with background to a
-    multiple of ``factor``.
-
-    Returns:
-        (h, w, C) float64 means and the (h, w) bool mask of blocks at least half on the object.
-    """
-    weight = _split_blocks(mask.astype(np.float64), factor)                 # (h, w, f*f)
-    blocks = _split_blocks(np.asarray(values, np.float64), factor)          # (h, w, C, f*f)
-    total = weight.sum(-1)
-    on = weight[..., None, :] > 0                      # NaN off the object (e.g. depth) must not leak in
-    masked = np.where(on, blocks * weight[..., None, :], 0).sum(-1) / np.maximum(total, 1e-12)[..., None]
-    mean = np.where((total > 0)[..., None], masked, blocks.mean(-1))
-    return mean, weight.mean(-1) >= 0.5
-
-
-def _split_blocks(a: np.ndarray, f: int) -> np.ndarray:
-    """Split the (H, W) axes of a (H, W) or (H, W, C) array into f×f blocks.
-
-    Returns (h, w, f*f) or (h, w, C, f*f) with h = ceil(H/f), w = ceil(W/f); padding is 0.
-    """
-    h, w = a.shape[:2]
-    ph, pw = -h % f, -w % f
-    a = np.pad(a, [(0, ph), (0, pw)] + [(0, 0)] * (a.ndim - 2))
-    h2, w2 = a.shape[0] // f, a.shape[1] // f
-    a = a.reshape(h2, f, w2, f, *a.shape[2:])
-    a = np.moveaxis(a, (1, 3), (-2, -1))
-    return a.reshape(*a.shape[:-2], f * f)
-
-
-def parse_indices(items: Sequence[int | str], n: int, what: str) -> list[int]:
-    """Expand ``[0, 3, "5-9"]`` into sorted unique 0-based indices, all in [0, n).
-
-    A string ``"a-b"`` is the inclusive range a…b (so ``"0-19"`` is DiLiGenT bear's first 20).
-    """
-    out: set[int] = set()
-    for item in items or ():
-        try:
-            if isinstance(item, str) and "-" in item.strip()[1:]:
-                a, b = item.split("-", 1)
-                lo, hi = int(a), int(b)
-                if hi < lo:
-                    raise ValueError
-                out.update(range(lo, hi + 1))
-            else:
-                out.add(int(item))
-        except ValueError:
-            raise InputError(f"{what}: {item!r} is neither an index nor a range 'a-b'") from None
-    bad = [i for i in out if not 0 <= i < n]
-    if bad:
-        raise InputError(f"{what}: index {min(bad)} is outside the {n} images (0 … {n - 1})")
-    return sorted(out)
-
-
-def prepare(subject: Subject, drop: Sequence[int | str] = (), crop_margin: int | None = None,
-            downsample: int = 1) -> Subject:
-    """Apply the user's reading options in a fixed order: drop images, crop, downsample."""
-    if drop:
-        dropped = set(parse_indices(drop, subject.n_images, "drop"))
-        keep = [i for i in range(subject.n_images) if i not in dropped]
-        if not keep:
-            raise InputError(f"drop removes all {subject.n_images} images of {subject.name!r}")
-        log.info("%s: dropping %d of %d images", subject.name, len(dropped), subject.n_images)
-        subject = subject.select(keep)
-    if crop_margin is not None:
-        subject = subject.crop_to_mask(int(crop_margin))
-    return subject.downsample(downsample)
-
-
-def add_noise(subject: Subject, sigma: float, seed: int) -> tuple[Subject, float]:
-    """Add zero-mean Gaussian noise to the captured images (supplementary case study 2).
-
-    The standard deviation is σ times the reference level: the 99th percentile of the observed
-    (not intensity-normalised) pixel values on the object, so σ = 0.05 is 5 % of a bright
-    pixel whatever the exposure. Nothing is clipped: noisy values may be negative.
-
-    Returns:
-        The noisy subject (images divided by the intensities again) and the reference level.
-    """
-    try:
-        sigma = float(sigma)
-    except (TypeError, ValueError):
-        raise InputError(f"noise must be a number (a standard deviation >= 0), got {sigma!r}") from None
-    if not np.isfinite(sigma) or sigma < 0:
-        raise InputError(f"noise must be a standard deviation >= 0, got {sigma}")
-    observed = subject.observed_images()
-    reference = float(np.percentile(observed[:, subject.mask], 99))
-    if sigma == 0:
-        return subject, reference
-    rng = np.random.default_rng(seed)
-    noisy = observed + np.float32(sigma * reference) * rng.standard_normal(observed.shape,
-                                                                          dtype=np.float32)
-    if subject.light_intensities is not None:
-        noisy /= subject.light_intensities[:, None, None, :]
-    return subject.replace(images=noisy), reference

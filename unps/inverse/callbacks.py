@@ -91,7 +91,8 @@ class ProgressLog(L.Callback):
         done = step - self._first_step
         per_step = (time.perf_counter() - self._start) / max(done, 1)
         metrics = trainer.callback_metrics
-        shown = [f"loss {float(metrics['loss/reconstruction']):.4f}"] if "loss/reconstruction" in metrics else []
+        loss = metrics.get("loss/reconstruction")
+        shown = [f"loss {float(loss):.4f}"] if loss is not None else []
         if "mae" in metrics:
             shown.append(f"normal error {float(metrics['mae']):.2f}°")
         log.info("step %d/%d: %s (%.3f s/step, %s left)", step, trainer.max_steps, ", ".join(shown),

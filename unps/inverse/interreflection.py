@@ -26,7 +26,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from unps.data.subject import block_mean
+from unps.grid import block_mean
 from unps.errors import InputError
 from unps.geometry import integrate_normals
 from unps.solvers.nayar import interreflection_kernel

@@ -22,6 +22,7 @@ import torch
 import torch.nn.functional as F
 
 from unps.errors import Diverged
+from unps.inverse.control import restore_rng, rng_state
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet, normal_net_input, shading, specular_map
 from unps.timing import Span, stage
@@ -62,7 +63,8 @@ class InverseRendering(L.LightningModule):
     """Loss, optimiser and logging of one subject's fit.
 
     The loss is the L1 reconstruction error over a random ``pixel_keep`` share of the object's
-    pixels, plus, for the first ``prior_steps`` steps, ``prior_weight``·mean‖N_o − N_init‖²:
+    pixels (clipped values left out), plus, for the first ``prior_steps`` steps,
+    ``prior_weight``·mean‖N_o − N_init‖²:
     networks initialised at random produce arbitrary normals, and without this pull the
     reflectance network can explain the images with any of them; Taniai & Maehara found a weight
     of 0.1 for 50 of 1000 steps enough to start in the robust initialisation's basin, and short
@@ -80,13 +82,14 @@ class InverseRendering(L.LightningModule):
         refine_lights: learn per-image directions and intensity scales, starting from the given.
         true_normals: (3, H, W) ground truth, for the progress bar's MAE only.
         fingerprint: identifies the run; stored in checkpoints so a resume cannot mix runs.
+        usable: (n, 1, H, W) 1 where a value may enter the loss, 0 where it is clipped; None: all.
     """
 
     def __init__(self, normal_net: NormalNet, reflectance_net: ReflectanceNet, images: torch.Tensor,
                  mask: np.ndarray, light_directions: torch.Tensor, init_normals: torch.Tensor,
                  interreflection: Interreflection | None, schedule: Schedule,
                  refine_lights: bool = False, true_normals: torch.Tensor | None = None,
-                 fingerprint: str = ""):
+                 fingerprint: str = "", usable: torch.Tensor | None = None):
         super().__init__()
         self.normal_net, self.reflectance_net = normal_net, reflectance_net
         self.schedule, self.interreflection = schedule, interreflection
@@ -101,6 +104,8 @@ class InverseRendering(L.LightningModule):
         self.register_buffer("normal_input", normal_net_input(images, self.mask[0, 0]), persistent=False)
         self.register_buffer("initial_lights", light_directions, persistent=False)
         self.register_buffer("init_normals", init_normals[None], persistent=False)
+        self.register_buffer("usable", None if usable is None
+                             else usable.contiguous(memory_format=channels_last), persistent=False)
         self.register_buffer("true_normals", None if true_normals is None else true_normals[None],
                              persistent=False)
         n = images.shape[0]
@@ -187,8 +192,10 @@ class InverseRendering(L.LightningModule):
         keep = self.mask * (torch.rand_like(self.mask) < s.pixel_keep)
         if keep.sum() == 0:
             keep = self.mask
+        if self.usable is not None:
+            keep = keep * self.usable[index]                     # (B, 1, H, W): clipped values out
         residual = (out["reconstruction"] - out["observed"]).abs() * keep
-        loss = residual.sum() / (keep.sum() * 3 * count)
+        loss = residual.sum() / (keep.expand(count, 1, -1, -1).sum().clamp_min(1) * 3)
         self.log("loss/reconstruction", loss, prog_bar=True)
         if self.global_step < s.prior_steps and s.prior_weight > 0:
             prior = (((out["normals"] - self.init_normals) ** 2).sum(1, keepdim=True) * self.mask
@@ -235,16 +242,3 @@ class InverseRendering(L.LightningModule):
 
     def train_dataloader(self):
         return torch.utils.data.DataLoader(range(self.schedule.steps), batch_size=None)
-
-
-def rng_state(device: torch.device) -> dict:
-    """The generators behind the input noise and the image and pixel draws: a resumed fit
-    continues exactly as the uninterrupted one would have."""
-    return {"cpu": torch.get_rng_state(),
-            "cuda": torch.cuda.get_rng_state(device) if device.type == "cuda" else None}
-
-
-def restore_rng(state: dict, device: torch.device) -> None:
-    torch.set_rng_state(state["cpu"])
-    if state["cuda"] is not None and device.type == "cuda":
-        torch.cuda.set_rng_state(state["cuda"], device)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 
 import numpy as np
@@ -10,6 +11,7 @@ import torch.nn.functional as F
 
 from unps.data.subject import Subject
 from unps.lightnet.bins import decode_lights
+from unps.lightnet.symmetry import SYMMETRIES, frame_matrix, mean_direction, transform_images
 from unps.lightnet.system import load_lightnet
 from unps.lights import Lights, light_errors
 from unps.lights.contour import align_to_contour
@@ -17,6 +19,9 @@ from unps.lights.selfcal import SelfCalibration, self_calibrate
 from unps.timing import stage
 
 log = logging.getLogger(__name__)
+
+SPREAD_WARNING = 10.0   # degrees; the shipped weights stay under 4.1° on every subject measured
+                        # (experiments/light_estimation/README.md), flipped ones included
 
 
 def network_input(images: np.ndarray, mask: np.ndarray, resolution: int
@@ -50,14 +55,17 @@ def network_input(images: np.ndarray, mask: np.ndarray, resolution: int
 
 
 def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode: bool = True,
-                    align: str | None = "contour", selfcal: SelfCalibration | None = None
-                    ) -> Lights:
+                    symmetric: bool = False, align: str | None = "contour",
+                    selfcal: SelfCalibration | None = None) -> Lights:
     """Directions and relative intensities of every image, from the captured images alone.
 
     Args:
         subject: its captured images (``observed_images()``) are used; known lights are not.
         checkpoint: weights to use; default: the weights shipped with unps.
         soft_decode: soft-arg-max decoding of the bins (else arg-max).
+        symmetric: average the network's estimates under the eight symmetries of the square
+            (:mod:`unps.lightnet.symmetry`; beyond the paper) and warn when they disagree by more
+            than :data:`SPREAD_WARNING` (median over the lights); False runs the network once.
         align: ``"contour"`` rotates the network's directions so that the occluding contour's
             normals face sideways (:func:`unps.lights.contour.align_to_contour`; beyond the
             paper), None keeps them as the network gave them.
@@ -69,13 +77,16 @@ def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode
 
     Returns:
         Lights with (n, 3) unit directions and (n, 3) intensities (one value per image,
-        repeated for RGB; mean 1 over the images).
+        repeated for RGB; mean 1 over the images), and the network's ``spread_deg``.
     """
     if align not in (None, "contour"):
         raise ValueError(f"light.align must be contour or null, got {align!r}")
     with stage("light network"):
-        lights = network_estimate(subject, checkpoint, soft_decode)
+        lights = network_estimate(subject, checkpoint, soft_decode, symmetric)
     log_stage(f"network ({checkpoint or 'shipped weights'})", lights, subject)
+    spread = lights.spread_deg
+    if spread is not None:
+        warn_if_uncertain(spread)
     if align == "contour":
         with stage("contour alignment"):
             lights = align_to_contour(subject, lights)
@@ -84,21 +95,49 @@ def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode
         with stage("self-calibration"):
             lights = self_calibrate(subject, lights, selfcal)
         log_stage("self-calibration", lights, subject)
-    return lights
+    return dataclasses.replace(lights, spread_deg=spread)
+
+
+def warn_if_uncertain(spread: np.ndarray) -> None:
+    """Log the spread of the symmetric estimates; a warning when its median is large."""
+    median = float(np.median(spread))
+    log.info("the light network's estimates under the 8 symmetries of the image disagree by %.1f° "
+             "(median over the lights; %.1f° at most)", median, float(spread.max()))
+    if median > SPREAD_WARNING:
+        log.warning("the estimated lights are uncertain: the light network's estimates under the 8 "
+                    "symmetries of the image disagree by %.1f° (median over the lights, above %.0f°); "
+                    "expect light errors of tens of degrees — use light=gt if the lights are known, "
+                    "or check light=selfcal against a calibration shot", median, SPREAD_WARNING)
 
 
 @torch.no_grad()
-def network_estimate(subject: Subject, checkpoint: str | None, soft_decode: bool) -> Lights:
-    """The light network's directions and intensities (mean 1, repeated for RGB)."""
+def network_estimate(subject: Subject, checkpoint: str | None, soft_decode: bool,
+                     symmetric: bool = False) -> Lights:
+    """The light network's directions and intensities (mean 1, repeated for RGB).
+
+    With ``symmetric``, the mean of its estimates under the eight symmetries of the square
+    (:mod:`unps.lightnet.symmetry`), each mapped back, with their spread in ``spread_deg``.
+    """
     net, config = load_lightnet(checkpoint)
     resolution = config["recipe"]["resolution"]
     images, mask = network_input(subject.observed_images(), subject.mask, resolution)
-    logits = net(images, mask)
-    directions, intensities = decode_lights(logits["azimuth"], logits["elevation"],
-                                            logits["intensity"], soft_decode)
-    intensities = intensities[0] / intensities[0].mean()
-    return Lights(directions[0].numpy().astype(np.float32),
-                  intensities[:, None].repeat(1, 3).numpy().astype(np.float32), "estimated")
+
+    def estimate(turns: int, mirror: bool) -> tuple[torch.Tensor, torch.Tensor]:
+        logits = net(transform_images(images, turns, mirror), transform_images(mask, turns, mirror))
+        seen, relative = decode_lights(logits["azimuth"], logits["elevation"], logits["intensity"],
+                                       soft_decode)
+        return seen[0] @ frame_matrix(turns, mirror), relative[0] / relative[0].mean()   # Mᵀ·l per row
+
+    spread = None
+    if symmetric:
+        directions, intensities = map(torch.stack, zip(*(estimate(*g) for g in SYMMETRIES)))
+        directions, spread = mean_direction(directions)
+        intensities = intensities.mean(0) / intensities.mean()
+    else:
+        directions, intensities = estimate(0, False)
+    return Lights(directions.numpy().astype(np.float32),
+                  intensities[:, None].repeat(1, 3).numpy().astype(np.float32), "estimated",
+                  spread_deg=None if spread is None else spread.numpy())
 
 
 def log_stage(name: str, lights: Lights, subject: Subject) -> None:

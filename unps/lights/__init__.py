@@ -2,29 +2,15 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
+from unps.data.lights import Lights
 from unps.data.subject import Subject
 from unps.errors import InputError
 from unps.io.files import atomic_path
 from unps.metrics import light_direction_mae, light_intensity_error
 
-
-@dataclass(frozen=True)
-class Lights:
-    """The lights a method uses.
-
-    Attributes:
-        directions: (n, 3) float32 unit, surface to light, unps frame.
-        intensities: (n, 3) float32 RGB, or None when the images are used as given.
-        source: how they were obtained (``gt``, ``estimated``, …).
-    """
-
-    directions: np.ndarray
-    intensities: np.ndarray | None
-    source: str
+__all__ = ["Lights", "ground_truth", "light_errors", "with_lights", "write_lights"]
 
 
 def ground_truth(subject: Subject) -> Lights:

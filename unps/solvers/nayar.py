@@ -21,9 +21,11 @@ import cv2
 import numpy as np
 from scipy.ndimage import map_coordinates
 
-from unps.data.subject import Subject, block_mean
+from unps.data.estimate import Estimate
+from unps.data.subject import Subject
+from unps.grid import block_mean
 from unps.geometry import integrate_normals
-from unps.solvers.woodham import (Estimate, lambertian_least_squares, normals_from_scaled,
+from unps.solvers.woodham import (lambertian_least_squares, normals_from_scaled,
                                   rgb_albedo, to_maps)
 
 log = logging.getLogger(__name__)

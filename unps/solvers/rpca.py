@@ -18,10 +18,11 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from unps.data.estimate import Estimate
 from unps.data.subject import Subject
 from unps.errors import InputError
 from unps.timing import stage
-from unps.solvers.woodham import (Estimate, lambertian_least_squares, normals_from_scaled,
+from unps.solvers.woodham import (lambertian_least_squares, normals_from_scaled,
                                   rgb_albedo, to_maps)
 
 log = logging.getLogger(__name__)

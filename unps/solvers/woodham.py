@@ -2,28 +2,10 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
-
 import numpy as np
 
+from unps.data.estimate import Estimate
 from unps.data.subject import Subject
-
-
-@dataclass(frozen=True)
-class Estimate:
-    """What a solver recovers.
-
-    Attributes:
-        normals: (H, W, 3) float32 unit normals in the unps frame (zero off the mask).
-        albedo: (H, W, 3) float32 RGB albedo (zero off the mask).
-        rendering: what a rendering method explains besides (``method=unps``:
-            :class:`unps.inverse.fit.Rendering`), or None.
-    """
-
-    normals: np.ndarray
-    albedo: np.ndarray
-    rendering: Any = None
 
 
 def lambertian_least_squares(intensity: np.ndarray, light_directions: np.ndarray) -> np.ndarray:

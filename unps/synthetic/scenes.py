@@ -19,8 +19,10 @@ from pathlib import Path
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from unps.data.diligent import read_diligent, verify_files, write_diligent
-from unps.data.subject import Subject, prepare
+from unps.data.diligent import read_diligent
+from unps.data.writer import verify_files, write_diligent
+from unps.data.prepare import prepare
+from unps.data.subject import Subject
 from unps.errors import InputError
 from unps.synthetic.render import light_dome, render_subject
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from unps.data.estimate import Estimate, Rendering
 from unps.data.subject import Subject
 from unps.geometry import depth_to_mesh
 from unps.io.files import atomic_path, write_json, write_npy
@@ -15,7 +16,6 @@ from unps.io.mesh import write_ply
 from unps.io.pictures import (albedo_rgb, error_figure_png, error_rgb, labelled_rows, lights_figure_png,
                                normal_rgb)
 from unps.lights import Lights, write_lights
-from unps.solvers.woodham import Estimate
 
 log = logging.getLogger(__name__)
 
@@ -81,7 +81,7 @@ def write_lights_picture(path: Path, lights: Lights, metrics: dict,
         tmp.write_bytes(lights_figure_png(lights.directions, intensities, title, truth))
 
 
-def write_rendering(out: Path, rendering) -> None:
+def write_rendering(out: Path, rendering: Rendering) -> None:
     """A rendering method's per-image maps, on its working grid (recorded in metrics.json):
     ``reflectance.npy`` and ``reconstruction.npy`` (n, h, w, 3) float16, and two contact sheets
     of up to 6 evenly spaced images: ``reconstruction.png`` (rows: observed, reconstructed,

@@ -25,7 +25,9 @@ MIN_IMAGES = 3          # three lights fix a normal and an albedo (Woodham)
 FEW_IMAGES = 6          # below this, shadows and highlights leave pixels with fewer than 3 good values
 MAX_CONDITION = 30.0    # σ1/σ3 of the light matrix above which a warning says the lights are nearly coplanar
 MIN_SPAN = 1e-3         # σ3/σ1 below which the lights do not span 3D at all
-TOP_LEVEL = 1 - 1 / 512  # values at or above this fraction of the stack's maximum are clipped
+TOP_LEVEL = 1 - 1e-5     # a value this close to its channel's maximum sits at the top level (closer
+                         # than one 16-bit level, looser than float32 rounding after dividing by intensities)
+MIN_CLIPPED_VALUES = 8   # a top level held by this many values is a clipping plateau, not one bright pixel
 CLIPPED_WARNING = 0.02  # share of the object's values at the top level that warns
 DARK_WARNING = 0.5      # share of the object's values that are exactly 0 that warns
 
@@ -74,9 +76,38 @@ def check_light_span(directions: np.ndarray, source: str, estimated: bool = Fals
     return condition
 
 
+def clipped_values(images: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Where the camera clipped: any channel at its channel's top level over the whole stack,
+    when that level is a plateau held by at least :data:`MIN_CLIPPED_VALUES` values. Per channel,
+    because white balance after clipping scales each channel's ceiling differently; a maximum
+    held by one bright pixel is not clipping.
+
+    Args:
+        images: (n, H, W, 3) as captured; mask: (H, W) bool.
+
+    Returns:
+        (n, H, W) bool, False off the mask.
+
+    Example:
+        >>> images = np.zeros((2, 1, 10, 3)); images[0, 0, :8] = 0.9; images[1, 0, 9] = 0.5
+        >>> clipped_values(images, np.ones((1, 10), bool)).astype(int)[:, 0]
+        array([[1, 1, 1, 1, 1, 1, 1, 1, 0, 0],
+               [0, 0, 0, 0, 0, 0, 0, 0, 0, 0]])
+    """
+    values = images[:, mask]                                   # (n, m, 3)
+    clipped = np.zeros(images.shape[:3], bool)
+    if values.size == 0:
+        return clipped
+    top = values.max(axis=(0, 1))                              # (3,)
+    at_top = (values >= TOP_LEVEL * top) & (top > 0)
+    plateau = at_top.sum(axis=(0, 1)) >= MIN_CLIPPED_VALUES     # (3,)
+    clipped[:, mask] = (at_top & plateau).any(-1)
+    return clipped
+
+
 def value_levels(images: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per image, the share of object pixels clipped (any channel at the top level of the whole
-    stack) and the share that are black (every channel 0).
+    """Per image, the share of object pixels clipped (:func:`clipped_values`) and the share that
+    are black (every channel 0).
 
     Args:
         images: (n, H, W, 3) as captured; mask: (H, W) bool.
@@ -85,10 +116,9 @@ def value_levels(images: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.n
         clipped, black: (n,) shares in [0, 1].
     """
     values = images[:, mask]                                   # (n, m, 3)
-    top = float(values.max())
-    if top <= 0:
+    if float(values.max()) <= 0:
         return np.zeros(len(images)), np.ones(len(images))
-    clipped = (values >= TOP_LEVEL * top).any(-1).mean(1)
+    clipped = clipped_values(images, mask)[:, mask].mean(1)
     black = (values <= 0).all(-1).mean(1)
     return clipped, black
 
@@ -118,8 +148,9 @@ def usable_subject(subject: Subject) -> Subject:
     if clipped.mean() > CLIPPED_WARNING:
         worst = int(np.argmax(clipped))
         log.warning("%s: %.0f%% of the object's pixels are clipped at the brightest level (worst: %s, "
-                    "%.0f%%); clipped values are darker than the truth and bend the normals — capture "
-                    "with a shorter exposure or mask them", source, 100 * clipped.mean(),
+                    "%.0f%%); clipped values are darker than the truth: method=unps leaves them out of "
+                    "its fit, the other methods use them as they are — capture with a shorter "
+                    "exposure where you can", source, 100 * clipped.mean(),
                     subject.filenames[worst], 100 * clipped[worst])
     if black.mean() > DARK_WARNING:
         log.warning("%s: %.0f%% of the object's pixels are black (0 in every channel); the images are "

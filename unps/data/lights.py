@@ -1,0 +1,82 @@
+"""The lights a method uses, and light arrays as they are read: shapes, finiteness, unit length."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from unps.errors import InputError
+
+log = logging.getLogger(__name__)
+
+UNIT_TOLERANCE = 1e-3
+
+
+@dataclass(frozen=True)
+class Lights:
+    """The lights a method uses.
+
+    Attributes:
+        directions: (n, 3) float32 unit, surface to light, unps frame.
+        intensities: (n, 3) float32 RGB, or None when the images are used as given.
+        source: how they were obtained (``gt``, ``estimated``, …).
+        spread_deg: (n,) how far the light network's estimates of each light disagree under the
+            symmetries of the image (:mod:`unps.lightnet.symmetry`), in degrees; None when not
+            estimated that way.
+    """
+
+    directions: np.ndarray
+    intensities: np.ndarray | None
+    source: str
+    spread_deg: np.ndarray | None = None
+
+
+def check_light_directions(directions, n_images: int, source: str) -> np.ndarray:
+    """Validate light directions and return them as unit float32 vectors.
+
+    Args:
+        directions: (n, 3) surface-to-light directions in the unps frame.
+        n_images: the number of images they must match.
+        source: the file or subject named in error messages.
+
+    Returns:
+        (n, 3) float32 unit vectors. Non-unit rows are normalised with a warning.
+
+    Raises:
+        InputError: wrong shape, NaN/Inf, or a zero-length direction.
+    """
+    d = np.asarray(directions, dtype=np.float64)
+    if d.ndim == 1 and d.size == 3:
+        d = d[None]
+    if d.shape != (n_images, 3):
+        raise InputError(f"{source}: expected {n_images} light directions of 3 values (one per "
+                         f"image), got an array of shape {d.shape}")
+    bad = ~np.isfinite(d).all(axis=1)
+    if bad.any():
+        raise InputError(f"{source}: light direction {int(np.argmax(bad))} is not finite: "
+                         f"{d[bad][0].tolist()}")
+    norm = np.linalg.norm(d, axis=1)
+    if (norm < 1e-8).any():
+        raise InputError(f"{source}: light direction {int(np.argmax(norm < 1e-8))} has zero length")
+    off = np.abs(norm - 1) > UNIT_TOLERANCE
+    if off.any():
+        log.warning("%s: %d light directions are not unit length (e.g. row %d, |l| = %.4f); "
+                    "normalising them", source, off.sum(), int(np.argmax(off)), norm[off][0])
+    return (d / norm[:, None]).astype(np.float32)
+
+
+def check_light_intensities(intensities, n_images: int, source: str) -> np.ndarray:
+    """Validate RGB light intensities: (n, 3), or (n,) shared by RGB; finite and > 0."""
+    e = np.asarray(intensities, dtype=np.float64)
+    if e.ndim == 1 and e.shape == (n_images,):
+        e = np.repeat(e[:, None], 3, axis=1)
+    if e.shape != (n_images, 3):
+        raise InputError(f"{source}: expected {n_images} light intensities of 3 (RGB) values, "
+                         f"got an array of shape {e.shape}")
+    bad = ~(np.isfinite(e) & (e > 0)).all(axis=1)
+    if bad.any():
+        raise InputError(f"{source}: light intensities must be finite and > 0; row "
+                         f"{int(np.argmax(bad))} is {e[bad][0].tolist()}")
+    return e.astype(np.float32)

@@ -1,0 +1,103 @@
+"""Running a fit: the Lightning trainer, checkpoints that only resume their own run, random
+state carried across a resume, and a clear stop when the loss diverges."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import time
+import warnings
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import torch
+
+from unps.data.subject import Subject
+from unps.errors import Diverged, InputError
+
+if TYPE_CHECKING:
+    from unps.inverse.system import InverseRendering, Schedule
+
+log = logging.getLogger(__name__)
+
+
+# Lightning warnings that do not apply to a one-subject fit: the "data loader" is a step counter
+# whose random draws the checkpoints restore, and a deprecation inside Lightning itself.
+LIGHTNING_NOISE = (".*dataloader is not resumable.*", ".*does not have many workers.*",
+                   ".*LeafSpec.*is deprecated.*")
+
+
+def fingerprint(subject: Subject, light_directions: np.ndarray, settings: dict) -> str:
+    """SHA-256 of the working data and settings: a checkpoint resumes only the run it came from."""
+    digest = hashlib.sha256()
+    for array in (subject.images, subject.mask, light_directions):
+        digest.update(np.ascontiguousarray(array).tobytes())
+    digest.update(json.dumps(settings, sort_keys=True, default=lambda v: np.asarray(v).tolist()).encode())
+    return digest.hexdigest()
+
+
+def train(system: InverseRendering, schedule: Schedule, output_dir: str | Path | None,
+          name: str) -> tuple[float, int]:
+    """Run the schedule with Lightning, resuming from ``<output_dir>/checkpoints/last.ckpt`` when
+    it holds this run (same fingerprint); returns the seconds spent and the step resumed from.
+
+    Raises:
+        InputError: the checkpoint belongs to another run.
+        Diverged: the loss stopped being finite; the message names the last good checkpoint.
+    """
+    import lightning as L
+    from lightning.pytorch.callbacks import ModelCheckpoint
+    from lightning.pytorch.loggers import TensorBoardLogger
+
+    from unps.inverse.callbacks import FitPictures, ProgressLog
+
+    ckpt_path, resumed_from = None, 0
+    progress = ProgressLog(every=schedule.update_every)
+    options: dict = dict(logger=False, enable_checkpointing=False, callbacks=[progress])
+    if output_dir is not None:
+        out = Path(output_dir)
+        last = out / "checkpoints" / "last.ckpt"
+        if last.is_file():
+            saved = torch.load(last, map_location="cpu", weights_only=False)
+            if saved.get("unps_fingerprint") != system.fingerprint:
+                raise InputError(f"{last}: this checkpoint belongs to another run (different images, "
+                                 f"lights or settings); choose a new hydra.run.dir or delete it")
+            ckpt_path, resumed_from = str(last), int(saved["global_step"])
+            log.info("resuming from %s at step %d", last, resumed_from)
+        options = dict(
+            logger=TensorBoardLogger(str(out), name="tensorboard", version=""),
+            callbacks=[ModelCheckpoint(dirpath=out / "checkpoints", save_last=True, save_top_k=0,
+                                       every_n_train_steps=schedule.update_every),
+                       FitPictures(every=schedule.update_every), progress])
+    trainer = L.Trainer(max_steps=schedule.steps, accelerator="auto", devices=1, log_every_n_steps=10,
+                        enable_model_summary=False, enable_progress_bar=False, num_sanity_val_steps=0,
+                        **options)
+    start = time.perf_counter()
+    try:
+        with warnings.catch_warnings():
+            for message in LIGHTNING_NOISE:
+                warnings.filterwarnings("ignore", message=message)
+            trainer.fit(system, ckpt_path=ckpt_path)
+    except Diverged as e:
+        kept = (f"; the last good state (step {schedule.update_every}·k) is kept in "
+                f"{Path(output_dir) / 'checkpoints' / 'last.ckpt'}" if output_dir is not None else "")
+        raise Diverged(f"unps diverged on {name!r}: {e}{kept}; try a lower preset.lr") from None
+    if trainer.global_step < schedule.steps:
+        raise RuntimeError(f"the fit stopped at step {trainer.global_step} of {schedule.steps}; "
+                           f"rerun in the same folder to resume")
+    return time.perf_counter() - start, resumed_from
+
+
+def rng_state(device: torch.device) -> dict:
+    """The generators behind the input noise and the image and pixel draws: a resumed fit
+    continues exactly as the uninterrupted one would have."""
+    return {"cpu": torch.get_rng_state(),
+            "cuda": torch.cuda.get_rng_state(device) if device.type == "cuda" else None}
+
+
+def restore_rng(state: dict, device: torch.device) -> None:
+    torch.set_rng_state(state["cpu"])
+    if state["cuda"] is not None and device.type == "cuda":
+        torch.cuda.set_rng_state(state["cuda"], device)

@@ -1,0 +1,62 @@
+"""The light network's training and validation data as one LightningDataModule."""
+
+from __future__ import annotations
+
+import lightning as L
+from torch.utils.data import DataLoader
+
+from unps.lightnet.materials import MaterialBank
+from unps.lightnet.shapes import mesh_views
+from unps.lightnet.synthesis import LightDataset
+
+VALIDATION_SEED_OFFSET = 1_000_003   # validation stacks never share a (seed, index) with training
+
+
+class LightData(L.LightningDataModule):
+    """Stacks rendered on the fly: a training set that starts where a resumed run left off, and a
+    fixed held-out validation set.
+
+    Args:
+        recipe: ``resolution``, ``images``, ``batch_size``, ``max_steps``, ``val_samples``,
+            ``workers`` (the ``recipe=`` group).
+        data: ``meshes_dir``, ``views_per_mesh``, ``lights_per_shape``, ``max_zenith_deg``,
+            ``materials``, ``mesh_fraction``, ``texture``, ``perturbation``, ``saturation``
+            (the ``data`` node of ``unps/conf/train.yaml``).
+        seed: the run's seed.
+        start_step: the step training resumes from; its first ``start_step · batch_size`` items
+            were seen before.
+    """
+
+    def __init__(self, recipe, data, seed: int, start_step: int = 0):
+        super().__init__()
+        self.recipe, self.data, self.seed, self.start_step = recipe, data, seed, start_step
+        self.train_set: LightDataset | None = None
+        self.val_set: LightDataset | None = None
+
+    def setup(self, stage: str | None = None) -> None:
+        if self.train_set is not None:
+            return
+        recipe, data = self.recipe, self.data
+        meshes = (mesh_views(data.meshes_dir, recipe.resolution, data.views_per_mesh, self.seed)
+                  if data.meshes_dir else None)
+        common = dict(resolution=recipe.resolution, images=recipe.images,
+                      lights_per_shape=data.lights_per_shape, max_zenith_deg=data.max_zenith_deg,
+                      materials=MaterialBank(**data.materials), meshes=meshes,
+                      mesh_fraction=data.mesh_fraction, texture=data.texture,
+                      perturbation=data.perturbation, saturation=data.saturation)
+        done = self.start_step * recipe.batch_size
+        remaining = max(recipe.max_steps * recipe.batch_size - done, recipe.batch_size)
+        self.train_set = LightDataset(length=remaining, seed=self.seed, offset=done, **common)
+        self.val_set = LightDataset(length=recipe.val_samples, seed=self.seed + VALIDATION_SEED_OFFSET,
+                                    **common)
+
+    def _loader(self, dataset: LightDataset) -> DataLoader:
+        workers = self.recipe.workers
+        return DataLoader(dataset, batch_size=self.recipe.batch_size, num_workers=workers,
+                          persistent_workers=workers > 0)
+
+    def train_dataloader(self) -> DataLoader:
+        return self._loader(self.train_set)
+
+    def val_dataloader(self) -> DataLoader:
+        return self._loader(self.val_set)

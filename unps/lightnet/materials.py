@@ -1,0 +1,89 @@
+"""Materials for the light network's training data, and shading a shape with one.
+
+Frame: x right, y up, z toward the camera; the view is (0, 0, 1).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+import torch.nn.functional as F
+
+from unps.errors import InputError
+from unps.lightnet.brdf import random_analytic, read_merl_binary, read_neural_brdf
+from unps.lightnet.shapes import ShapeMaps, cast_shadows
+
+
+def shade(maps: ShapeMaps, brdf, lights: torch.Tensor, intensities: torch.Tensor,
+          albedo: torch.Tensor | None = None, shadows: bool = True) -> torch.Tensor:
+    """Radiance e · f(l, v) · max(n·l, 0), in shadow 0.
+
+    Args:
+        lights: (n, 3); intensities: (n,); albedo: optional (H, W) multiplier.
+
+    Returns:
+        (n, 3, H, W) float32.
+    """
+    m = maps.mask
+    n = maps.normals[m]                                               # (P, 3)
+    tangent = F.normalize(torch.linalg.cross(torch.where(n[:, :1].abs() < 0.9,
+                                                         torch.tensor([1.0, 0, 0]),
+                                                         torch.tensor([0, 1.0, 0])), n), dim=-1)
+    bitangent = torch.linalg.cross(n, tangent)
+    frame = torch.stack([tangent, bitangent, n], 1)                   # (P, 3, 3) rows
+    wi = torch.einsum("pij,lj->lpi", frame, lights)                   # (L, P, 3)
+    wo = frame[:, :, 2][None].expand_as(wi)                           # view (0, 0, 1)
+    with torch.no_grad():
+        value = brdf(wi, wo) * wi[..., 2:].clamp_min(0)               # (L, P, 3)
+    if albedo is not None:
+        value = value * albedo[m][None, :, None]
+    value = value * intensities[:, None, None]
+    if shadows:
+        value = value * (~cast_shadows(maps, lights)[:, m])[..., None]
+    images = torch.zeros(len(lights), *m.shape, 3)
+    images[:, m] = value
+    return images.permute(0, 3, 1, 2)
+
+
+class MaterialBank:
+    """Draws materials: analytic lobes, MERL ``.binary`` tables, MERL neural fits, by weight.
+
+    Args:
+        analytic: weight of random analytic materials (always available).
+        merl_dir, merl: a folder of ``.binary`` files and its weight.
+        neural_dir, neural: a folder of neural fits (``.h5``) and its weight.
+    """
+
+    def __init__(self, analytic: float = 1.0, merl_dir: str | None = None, merl: float = 0.0,
+                 neural_dir: str | None = None, neural: float = 0.0):
+        self.families, self.weights = ["analytic"], [analytic]
+        self.files = {}
+        for family, folder, weight, suffix in (("merl", merl_dir, merl, ".binary"),
+                                               ("neural", neural_dir, neural, ".h5")):
+            if weight > 0:
+                if not folder or not Path(folder).expanduser().is_dir():
+                    raise InputError(f"materials: {family} has weight {weight} but its folder "
+                                     f"{folder!r} does not exist")
+                files = sorted(Path(folder).expanduser().glob(f"*{suffix}"))
+                if not files:
+                    raise InputError(f"{folder}: no {suffix} files")
+                self.files[family] = files
+                self.families.append(family)
+                self.weights.append(weight)
+        if sum(self.weights) <= 0:
+            raise InputError("materials: the weights must not all be zero")
+        self._loaded = {}
+
+    def draw(self, generator: torch.Generator, family: str | None = None):
+        """A random material (of ``family`` if given); returns (family, brdf)."""
+        if family is None:
+            p = torch.tensor(self.weights, dtype=torch.float64)
+            family = self.families[int(torch.multinomial(p / p.sum(), 1, generator=generator))]
+        if family == "analytic":
+            return family, random_analytic(generator)
+        files = self.files[family]
+        path = files[int(torch.randint(len(files), (1,), generator=generator))]
+        if path not in self._loaded:
+            self._loaded[path] = (read_merl_binary if family == "merl" else read_neural_brdf)(path)
+        return family, self._loaded[path]
