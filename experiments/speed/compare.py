@@ -2,10 +2,11 @@
 
     python experiments/speed/compare.py --before 6efa55c                 # ball, cat, pot1, fast, gt
     python experiments/speed/compare.py --before 6efa55c --subjects ball --set preset.steps=200
+    python experiments/speed/compare.py --before 6efa55c --subjects ball --preset paper --set preset.steps=20
 
 ``--before`` is any git revision of this repository; it is checked out once into a detached
 worktree under ``<out>/before-<rev>``. For every subject, the fit runs as a user runs it,
-``python -m unps.fit subject=<s> method=unps preset=fast light=gt`` (plus ``--set``), first
+``python -m unps.fit subject=<s> method=unps preset=<preset> light=gt`` (plus ``--set``), first
 with the old source and then with this checkout, each in its own process, so the two share
 the machine's state as closely as one run allows. "wall" is the whole command (start-up,
 reading, fit, writing), "fit" the method and depth (``runtime_s`` in metrics.json). The table
@@ -41,10 +42,10 @@ def worktree(revision: str, out: Path) -> Path:
     return path
 
 
-def run(source: Path, subject: str, overrides: list[str], run_dir: Path) -> dict:
+def run(source: Path, subject: str, preset: str, overrides: list[str], run_dir: Path) -> dict:
     """One fit from ``source`` in a fresh process; its wall time and metrics."""
     shutil.rmtree(run_dir, ignore_errors=True)
-    command = [sys.executable, "-m", "unps.fit", f"subject={subject}", "method=unps", "preset=fast",
+    command = [sys.executable, "-m", "unps.fit", f"subject={subject}", "method=unps", f"preset={preset}",
                "light=gt", f"paths.diligent_dir={DILIGENT}", f"hydra.run.dir={run_dir}", *overrides]
     env = {**os.environ, "PYTHONPATH": str(source)}
     start = time.perf_counter()
@@ -62,6 +63,7 @@ def main() -> None:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--before", required=True, help="git revision to compare with")
     parser.add_argument("--subjects", nargs="+", default=["ball", "cat", "pot1"])
+    parser.add_argument("--preset", default="fast")
     parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE")
     parser.add_argument("--out", type=Path, default=Path("runs/speed-compare"))
     args = parser.parse_args()
@@ -72,15 +74,15 @@ def main() -> None:
             "|---" * 11 + "|"]
     for subject in args.subjects:
         print(f"{subject}: before ({old.name}) …", flush=True)
-        a = run(old, subject, args.set, args.out / f"{subject}-before")
+        a = run(old, subject, args.preset, args.set, args.out / f"{subject}-before")
         print(f"{subject}: now …", flush=True)
-        b = run(REPO, subject, args.set, args.out / f"{subject}-now")
+        b = run(REPO, subject, args.preset, args.set, args.out / f"{subject}-now")
         rows.append(f"| {subject} | {a['wall_s']:.1f} | {b['wall_s']:.1f} | {a['wall_s'] / b['wall_s']:.2f}× "
                     f"| {a['fit_s']:.1f} | {b['fit_s']:.1f} | {a['s_per_step']:.3f} | {b['s_per_step']:.3f} "
                     f"| {a['normal_mae']:.2f} | {b['normal_mae']:.2f} "
                     f"| {b['normal_mae'] - a['normal_mae']:+.2f} |")
     text = (f"machine: {machine()}\nbefore: {args.before} ({old.name}); now: this checkout; "
-            f"method=unps preset=fast light=gt {' '.join(args.set)}\n\n" + "\n".join(rows) + "\n")
+            f"method=unps preset={args.preset} light=gt {' '.join(args.set)}\n\n" + "\n".join(rows) + "\n")
     print(text)
     (args.out / "compare.md").write_text(text)
 
