@@ -13,7 +13,8 @@
    With ``--renders Face Tablet1 …``, the same directions for unps's own rendered subjects.
 2. Held-out synthetic stacks (seeds never used in training) of the checkpoint's own recipe, per
    BRDF family: analytic always, MERL neural fits when ``<data>/merl_nbrdf`` exists, MERL tables
-   with ``--merl-dir``.
+   with ``--merl-dir``; and per shape family (blob, vessel, relief, sculpture), seen through
+   the simulated camera under every light layout.
 3. Speed of the checkpoint's recipe on this machine: generating one batch (one core, as the
    training's data worker) against one training step.
 """
@@ -35,6 +36,8 @@ from unps.lights import with_lights
 from unps.lightnet.bins import decode_lights, encode_lights
 from unps.lightnet.estimate import estimate_lights
 from unps.lightnet.materials import MaterialBank
+from unps.lightnet.rig import LAYOUTS, Camera
+from unps.lightnet.shapes import SHAPES
 from unps.lightnet.synthesis import LightDataset
 from unps.lightnet.system import SHIPPED, batch_light_errors, build_net, load_lightnet
 from unps.metrics import normal_metrics
@@ -91,20 +94,28 @@ def renders(names: list[str], checkpoint):
 
 @torch.no_grad()
 def synthetic(net, config, families: dict, samples: int):
+    """Held-out stacks per BRDF family (blobs, the cap of lights, no camera) and per shape family
+    (analytic materials, every light layout, the simulated camera)."""
     recipe = config["recipe"]
+    common = dict(resolution=recipe["resolution"], images=recipe["images"], seed=987_654)
     print(f"held-out synthetic ({recipe['resolution']} px, {recipe['images']} images, {samples} "
           f"stacks per family)   dir MAE   int err")
     for family, bank in families.items():
-        ds = LightDataset(samples, resolution=recipe["resolution"], images=recipe["images"],
-                          materials=bank, seed=987_654, family=family)
-        maes, errs = [], []
-        for i in range(0, samples, 8):
-            batch = torch.utils.data.default_collate([ds[j] for j in range(i, min(i + 8, samples))])
-            logits = net(batch["images"], batch["mask"])
-            d, e = decode_lights(logits["azimuth"], logits["elevation"], logits["intensity"], True)
-            mae, err = batch_light_errors(d, e, batch["directions"], batch["intensities"])
-            maes.append(mae), errs.append(err)
-        print(f"{family:<60} {torch.cat(maes).mean():>7.2f}° {torch.cat(errs).mean():>9.3f}", flush=True)
+        score(net, LightDataset(samples, materials=bank, family=family, **common), f"BRDF {family}")
+    for shape in SHAPES:
+        score(net, LightDataset(samples, shape=shape, layouts=dict.fromkeys(LAYOUTS, 1.0),
+                                camera=Camera(), **common), f"shape {shape} (rig layouts, camera)")
+
+
+def score(net, ds: LightDataset, label: str) -> None:
+    maes, errs = [], []
+    for i in range(0, len(ds), 8):
+        batch = torch.utils.data.default_collate([ds[j] for j in range(i, min(i + 8, len(ds)))])
+        logits = net(batch["images"], batch["mask"])
+        d, e = decode_lights(logits["azimuth"], logits["elevation"], logits["intensity"], True)
+        mae, err = batch_light_errors(d, e, batch["directions"], batch["intensities"])
+        maes.append(mae), errs.append(err)
+    print(f"{label:<60} {torch.cat(maes).mean():>7.2f}° {torch.cat(errs).mean():>9.3f}", flush=True)
 
 
 def speed(config, steps: int = 10):

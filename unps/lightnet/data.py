@@ -6,6 +6,7 @@ import lightning as L
 from torch.utils.data import DataLoader
 
 from unps.lightnet.materials import MaterialBank
+from unps.lightnet.rig import Camera
 from unps.lightnet.shapes import mesh_views
 from unps.lightnet.synthesis import LightDataset
 
@@ -20,8 +21,8 @@ class LightData(L.LightningDataModule):
         recipe: ``resolution``, ``images``, ``batch_size``, ``max_steps``, ``val_samples``,
             ``workers`` (the ``recipe=`` group).
         data: ``meshes_dir``, ``views_per_mesh``, ``lights_per_shape``, ``max_zenith_deg``,
-            ``materials``, ``mesh_fraction``, ``texture``, ``perturbation``, ``saturation``
-            (the ``data`` node of ``unps/conf/train.yaml``).
+            ``materials``, ``mesh_fraction``, ``texture``, ``perturbation``, ``saturation``,
+            ``shapes``, ``layouts``, ``camera`` (the ``data`` node of ``unps/conf/train.yaml``).
         seed: the run's seed.
         start_step: the step training resumes from; its first ``start_step · batch_size`` items
             were seen before.
@@ -43,7 +44,9 @@ class LightData(L.LightningDataModule):
                       lights_per_shape=data.lights_per_shape, max_zenith_deg=data.max_zenith_deg,
                       materials=MaterialBank(**data.materials), meshes=meshes,
                       mesh_fraction=data.mesh_fraction, texture=data.texture,
-                      perturbation=data.perturbation, saturation=data.saturation)
+                      perturbation=data.perturbation, saturation=data.saturation,
+                      shapes=data.get("shapes"), layouts=data.get("layouts"),
+                      camera=camera(data.get("camera")))   # absent in runs made before they existed
         done = self.start_step * recipe.batch_size
         remaining = max(recipe.max_steps * recipe.batch_size - done, recipe.batch_size)
         self.train_set = LightDataset(length=remaining, seed=self.seed, offset=done, **common)
@@ -60,3 +63,11 @@ class LightData(L.LightningDataModule):
 
     def val_dataloader(self) -> DataLoader:
         return self._loader(self.val_set)
+
+
+def camera(settings) -> Camera | None:
+    """The simulated camera of ``data.camera`` (None: the paper's perturbation instead)."""
+    if settings is None:
+        return None
+    fields = dict(settings)
+    return Camera(**{**fields, "exposure": tuple(fields["exposure"]), "formats": dict(fields["formats"])})

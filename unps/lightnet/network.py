@@ -18,6 +18,12 @@ def conv(cin: int, cout: int, stride: int) -> nn.Sequential:
     return nn.Sequential(nn.Conv2d(cin, cout, 3, stride, 1), nn.LeakyReLU(0.1, inplace=True))
 
 
+def channels_last(x: torch.Tensor) -> torch.Tensor:
+    """(N, C, H, W) stored channels-last: oneDNN's fast layout for these convolutions on a CPU
+    (1.4× per training step, ``experiments/light_estimation/throughput.py``)."""
+    return x.contiguous(memory_format=torch.channels_last)
+
+
 def normalise_stack(images: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     """Divide each stack by its mean over the object, so only relative brightness remains.
 
@@ -69,9 +75,9 @@ class LightNet(nn.Module):
         b, n, _, h, w = images.shape
         x = torch.cat([normalise_stack(images, mask),
                        mask.unsqueeze(1).expand(b, n, 1, h, w)], 2).flatten(0, 1)
-        features = self.extractor(x)                                   # (B·n, 4c, h/16, w/16)
+        features = self.extractor(channels_last(x))                    # (B·n, 4c, h/16, w/16)
         own = features.unflatten(0, (b, n))
         fused = own.max(1, keepdim=True).values.expand_as(own)
-        x = self.classifier(torch.cat([own, fused], 2).flatten(0, 1))
+        x = self.classifier(channels_last(torch.cat([own, fused], 2).flatten(0, 1)))
         x = self.embed(F.adaptive_avg_pool2d(x, 4).flatten(1))
         return {name: head(x).unflatten(0, (b, n)) for name, head in self.heads.items()}

@@ -1,5 +1,5 @@
-"""Scenes for the light network's training data: shapes as normal and depth maps, lights on the
-upper hemisphere, and the shadows the shapes cast.
+"""Scenes for the light network's training data: shapes as normal and depth maps, in four
+families (:data:`SHAPES`) or from meshes, and the shadows they cast.
 
 Frame: x right, y up, z toward the camera; the orthographic view covers [−1, 1]², so one
 pixel is 2 / resolution units and depth is in the same units.
@@ -37,9 +37,7 @@ def sample_generator(seed: int, index: int) -> torch.Generator:
 def blob(resolution: int, generator: torch.Generator) -> ShapeMaps:
     """A smooth random blob: a dome over a star-shaped outline, with Gaussian bumps and dents."""
     u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
-    t = torch.linspace(-1, 1, resolution)
-    y, x = -t[:, None].expand(resolution, resolution), t[None, :].expand(resolution, resolution)
-    phi, rho = torch.atan2(y, x), torch.hypot(x, y)
+    x, y, phi, rho = _plane(resolution)
     k = torch.arange(1, 6, dtype=torch.float32)
     outline = 0.55 + 0.35 * u(1) + ((u(5) - 0.5) * 0.4 / k * torch.cos(
         k * phi[..., None] + 2 * math.pi * u(5))).sum(-1)
@@ -53,6 +51,104 @@ def blob(resolution: int, generator: torch.Generator) -> ShapeMaps:
         z = z + amplitude * torch.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2 * width ** 2)) * (r < 1)
     mask = rho < 0.985 * outline
     return maps_from_depth(z, mask)
+
+
+def vessel(resolution: int, generator: torch.Generator) -> ShapeMaps:
+    """An open vessel (bowl, pot, vase) seen into its mouth: a convex outer wall around a concave
+    cavity, the mouth off-centre as a tilted view shows it, with a raised lip."""
+    u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
+    x, y, phi, rho = _plane(resolution)
+    k = torch.arange(1, 4, dtype=torch.float32)
+    outline = 0.6 + 0.3 * u(1) + ((u(3) - 0.5) * 0.15 / k * torch.cos(
+        k * phi[..., None] + 2 * math.pi * u(3))).sum(-1)
+    size = float(outline.mean())
+    z = (0.3 + 0.7 * u(1)) * size * torch.sqrt(1 - (rho / outline).clamp(max=1) ** 2)
+    mouth = (0.35 + 0.45 * u(1)) * size
+    cx, cy = (u(2) - 0.5) * 0.6 * (size - mouth)
+    rm = torch.hypot(x - cx, y - cy) / mouth
+    depth = (0.3 + 0.9 * u(1)) * mouth
+    z = z - depth * (1 - rm ** 2).clamp_min(0) ** (1 + u(1))
+    lip = 0.15 * u(1) * mouth
+    z = z + lip * torch.exp(-((rm - 1) ** 2) / (2 * 0.08 ** 2))
+    return maps_from_depth(z, rho < 0.985 * outline)
+
+
+def relief(resolution: int, generator: torch.Generator) -> ShapeMaps:
+    """A tablet or relief: a tilted slab, seen face on, with raised and carved patches and grooves
+    whose sharp edges cast shadows."""
+    u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
+    x, y, _, _ = _plane(resolution)
+    angle = (u(1) - 0.5) * 0.6
+    across = x * math.cos(angle) + y * math.sin(angle)
+    along = -x * math.sin(angle) + y * math.cos(angle)
+    half_w, half_h = 0.55 + 0.35 * u(1), 0.55 + 0.35 * u(1)
+    mask = (across.abs() < half_w) & (along.abs() < half_h)
+    tilt = (u(2) - 0.5) * 0.5
+    z = 0.3 + tilt[0] * x + tilt[1] * y
+    for _ in range(int(4 + 10 * u(1))):
+        cx, cy = (u(2) - 0.5) * 1.6
+        rx, ry = 0.04 + 0.3 * u(2)
+        turn = math.pi * float(u(1))
+        a = ((x - cx) * math.cos(turn) + (y - cy) * math.sin(turn)) / rx
+        b = (-(x - cx) * math.sin(turn) + (y - cy) * math.cos(turn)) / ry
+        edge = 0.02 + 0.15 * u(1)                         # soft (rounded) to sharp (stepped) edges
+        height = (u(1) - 0.45) * 0.25 * min(float(rx), float(ry)) / 0.1
+        z = z + height * torch.sigmoid((1 - torch.hypot(a, b)) / edge)
+    return maps_from_depth(z, mask)
+
+
+def sculpture(resolution: int, generator: torch.Generator) -> ShapeMaps:
+    """Several blobs fused into one: where their surfaces meet, deep creases and crevices; the
+    whole surface carries a fine random displacement."""
+    u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
+    x, y, _, _ = _plane(resolution)
+    z = torch.full_like(x, -torch.inf)
+    for _ in range(int(2 + 4 * u(1))):
+        cx, cy = (u(2) - 0.5) * 0.9
+        radius = 0.25 + 0.35 * u(1)
+        r = torch.hypot(x - cx, y - cy) / radius
+        part = (0.5 + 0.8 * u(1)) * radius * torch.sqrt((1 - r ** 2).clamp_min(0)) + 0.3 * u(1)
+        z = torch.where(r < 1, torch.maximum(z, part), z)
+    mask = torch.isfinite(z)
+    coarse = torch.rand(1, 1, 10, 10, generator=generator) - 0.5
+    z = torch.where(mask, z, torch.zeros_like(z)) + 0.04 * float(u(1)) * F.interpolate(
+        coarse, size=(resolution, resolution), mode="bicubic", align_corners=True)[0, 0]
+    return maps_from_depth(z, _eroded(mask))
+
+
+SHAPES = {"blob": blob, "vessel": vessel, "relief": relief, "sculpture": sculpture}
+
+
+def draw_shape(weights: dict[str, float], resolution: int, generator: torch.Generator,
+               family: str | None = None) -> ShapeMaps:
+    """A shape from one of :data:`SHAPES`, drawn by weight (or of ``family`` if given)."""
+    if family is None:
+        names = [name for name, weight in weights.items() if weight > 0]
+        p = torch.tensor([weights[name] for name in names], dtype=torch.float64)
+        family = names[0] if len(names) == 1 else \
+            names[int(torch.multinomial(p / p.sum(), 1, generator=generator))]
+    return SHAPES[family](resolution, generator)
+
+
+def check_weights(weights: dict[str, float], known, what: str) -> None:
+    """Weights name only known families, are ≥ 0 and not all 0 (an ``InputError`` otherwise)."""
+    unknown = set(weights) - set(known)
+    if unknown:
+        raise InputError(f"{what}: unknown {sorted(unknown)}; expected some of {list(known)}")
+    if any(w < 0 for w in weights.values()) or sum(weights.values()) <= 0:
+        raise InputError(f"{what}: weights must be >= 0 and not all 0, got {dict(weights)}")
+
+
+def _plane(resolution: int) -> tuple[torch.Tensor, ...]:
+    """x, y, azimuth and radius of every pixel, (R, R) each, over [−1, 1]² (row 0 at y = 1)."""
+    t = torch.linspace(-1, 1, resolution)
+    y, x = -t[:, None].expand(resolution, resolution), t[None, :].expand(resolution, resolution)
+    return x, y, torch.atan2(y, x), torch.hypot(x, y)
+
+
+def _eroded(mask: torch.Tensor) -> torch.Tensor:
+    """The mask less its one-pixel border (whose normals the central differences smear)."""
+    return -F.max_pool2d(-mask[None, None].float(), 3, 1, 1)[0, 0] > 0.5
 
 
 def maps_from_depth(z: torch.Tensor, mask: torch.Tensor) -> ShapeMaps:
@@ -89,14 +185,6 @@ def mesh_views(folder: str | os.PathLike, resolution: int, views: int, seed: int
             out.append(ShapeMaps(torch.as_tensor(normals), torch.as_tensor(depth, dtype=torch.float32),
                                  torch.as_tensor(mask)))
     return out
-
-
-def hemisphere_lights(count: int, max_zenith_deg: float, generator: torch.Generator) -> torch.Tensor:
-    """(count, 3) unit directions uniform over the cap within ``max_zenith_deg`` of +z."""
-    z = 1 - torch.rand(count, generator=generator) * (1 - math.cos(math.radians(max_zenith_deg)))
-    phi = 2 * math.pi * torch.rand(count, generator=generator)
-    s = torch.sqrt(1 - z ** 2)
-    return torch.stack([s * torch.cos(phi), s * torch.sin(phi), z], -1)
 
 
 def cast_shadows(maps: ShapeMaps, lights: torch.Tensor, steps: int = 24) -> torch.Tensor:

@@ -1,9 +1,11 @@
 """Training data for the light network, generated on the fly.
 
-A sample is a function of (seed, index): a shape (a random blob, or a view of a mesh from a
-folder), a material (analytic, MERL table or MERL neural fit, mixed by weight), 64 lights on the
-upper hemisphere of which ``images`` are drawn, attached and cast shadows, per-image
-intensities U(0.2, 2) shared by RGB, and the paper's perturbation U(−0.025, 0.025).
+A sample is a function of (seed, index): a shape (one of the families of
+:data:`unps.lightnet.shapes.SHAPES`, or a view of a mesh from a folder), a material (analytic,
+MERL table or MERL neural fit, mixed by weight), 64 lights in one of the rig layouts of
+:mod:`unps.lightnet.rig` of which ``images`` are drawn, attached and cast shadows, per-image
+intensities U(0.2, 2) shared by RGB, and then either the paper's perturbation U(−0.025, 0.025) or
+a simulated camera (exposure, noise, saturation, 8/16-bit storage).
 
 Frame: x right, y up, z toward the camera; the orthographic view covers [−1, 1]², so one
 pixel is 2 / resolution units and depth is in the same units.
@@ -17,7 +19,8 @@ from torch.utils.data import Dataset
 
 from unps.errors import InputError
 from unps.lightnet.materials import MaterialBank, shade
-from unps.lightnet.shapes import ShapeMaps, blob, hemisphere_lights, sample_generator
+from unps.lightnet.rig import LAYOUTS, Camera, draw_lights, record
+from unps.lightnet.shapes import SHAPES, ShapeMaps, check_weights, draw_shape, sample_generator
 
 
 class LightDataset(Dataset):
@@ -36,7 +39,14 @@ class LightDataset(Dataset):
         saturation: the level, in units of that 99th percentile, where the simulated camera
             saturates (measured mirror-like materials otherwise put highlights hundreds of times
             above the rest of the stack); None keeps every value.
+        shapes: weights of the shape families of :data:`~unps.lightnet.shapes.SHAPES`
+            (default: blobs only).
+        layouts: weights of the light layouts of :data:`~unps.lightnet.rig.LAYOUTS`
+            (default: the uniform cap only).
+        camera: a simulated :class:`~unps.lightnet.rig.Camera`; it replaces ``saturation`` and
+            ``perturbation``. None keeps them.
         family: force one material family (for per-family validation).
+        shape: force one shape family (for per-family validation).
         offset: item i is sample ``offset + i`` (a resumed run continues where it stopped).
     """
 
@@ -45,11 +55,20 @@ class LightDataset(Dataset):
                  materials: MaterialBank | None = None, meshes: list[ShapeMaps] | None = None,
                  mesh_fraction: float = 0.0, texture: float = 0.3, perturbation: float = 0.025,
                  intensity_range: tuple[float, float] = (0.2, 2.0), saturation: float | None = 4.0,
-                 seed: int = 0, family: str | None = None, offset: int = 0):
+                 shapes: dict[str, float] | None = None, layouts: dict[str, float] | None = None,
+                 camera: Camera | None = None, seed: int = 0, family: str | None = None,
+                 shape: str | None = None, offset: int = 0):
         if resolution % 32 or resolution < 32:
             raise InputError(f"resolution must be a multiple of 32, got {resolution}")
         if not 1 <= images <= lights_per_shape:
             raise InputError(f"images per sample must lie in 1…{lights_per_shape}, got {images}")
+        self.shapes = dict(shapes) if shapes else {"blob": 1.0}
+        self.layouts = dict(layouts) if layouts else {"cap": 1.0}
+        check_weights(self.shapes, SHAPES, "shape families")
+        check_weights(self.layouts, LAYOUTS, "light layouts")
+        if shape is not None and shape not in SHAPES:
+            raise InputError(f"shape family {shape!r} unknown; expected one of {list(SHAPES)}")
+        self.camera, self.shape = camera, shape
         self.length, self.resolution, self.images = length, resolution, images
         self.lights_per_shape, self.max_zenith_deg = lights_per_shape, max_zenith_deg
         self.materials = materials or MaterialBank()
@@ -64,14 +83,14 @@ class LightDataset(Dataset):
     def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
         g = sample_generator(self.seed, self.offset + index)
         u = lambda *shape: torch.rand(*shape, generator=g)           # noqa: E731
-        if self.meshes and float(u(1)) < self.mesh_fraction:
+        if self.meshes and self.shape is None and float(u(1)) < self.mesh_fraction:
             maps = self.meshes[int(torch.randint(len(self.meshes), (1,), generator=g))]
             if maps.depth.shape[0] != self.resolution:
                 raise InputError(f"mesh views are {maps.depth.shape[0]} px, data {self.resolution} px")
         else:
-            maps = blob(self.resolution, g)
+            maps = draw_shape(self.shapes, self.resolution, g, self.shape)
         family, brdf = self.materials.draw(g, self.family)
-        lights = hemisphere_lights(self.lights_per_shape, self.max_zenith_deg, g)
+        lights = draw_lights(self.layouts, self.lights_per_shape, self.max_zenith_deg, g)
         pick = torch.randperm(self.lights_per_shape, generator=g)[: self.images]
         lights = lights[pick]
         lo, hi = self.intensity_range
@@ -85,9 +104,12 @@ class LightDataset(Dataset):
         values = images[:, :, maps.mask].flatten()
         level = torch.quantile(values[:: max(1, len(values) // 8192)], 0.99).clamp_min(1e-8)
         images = images / level
-        if self.saturation is not None:
-            images = images.clamp(max=self.saturation)
-        images = images + self.perturbation * (2 * torch.rand(images.shape, generator=g) - 1)
+        if self.camera is not None:
+            images = record(images, self.camera, g)
+        else:
+            if self.saturation is not None:
+                images = images.clamp(max=self.saturation)
+            images = images + self.perturbation * (2 * torch.rand(images.shape, generator=g) - 1)
         images = images * maps.mask
         return {"images": images.float(), "mask": maps.mask[None].float(),
                 "directions": lights.float(), "intensities": intensities.float(),

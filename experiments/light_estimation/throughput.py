@@ -1,0 +1,114 @@
+"""Training throughput of the light network on this CPU: each candidate speed-up measured alone.
+
+    python experiments/light_estimation/throughput.py                 # the recipe=cpu sizes
+    python experiments/light_estimation/throughput.py --steps 20 --batch 8 16 32
+
+Prints, for fixed pre-generated batches of the CPU recipe (64 px, 16 images, width 32), the
+training step (forward, backward, Adam) in samples per second for: contiguous tensors (as
+before), channels-last (as it is), bf16 autocast, ``torch.compile`` (inductor; its compile
+time apart), and larger batches; and the data generation in samples per second on one core,
+for the old data (blobs, cap of lights, perturbation) and the new (every shape family and
+light layout, the simulated camera).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+import time
+from pathlib import Path
+from unittest import mock
+
+import torch
+import torch.nn.functional as F
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "speed"))
+from stages import machine  # noqa: E402
+
+from unps.lightnet.bins import encode_lights
+from unps.lightnet import network
+from unps.lightnet.network import LightNet
+from unps.lightnet.rig import LAYOUTS, Camera
+from unps.lightnet.shapes import SHAPES
+from unps.lightnet.synthesis import LightDataset
+
+KEYS = ("azimuth", "elevation", "intensity")
+
+
+def batches(dataset: LightDataset, size: int, count: int) -> list[dict]:
+    return [torch.utils.data.default_collate([dataset[i * size + j] for j in range(size)])
+            for i in range(count)]
+
+
+def step_rate(net: torch.nn.Module, data: list[dict], autocast: bool = False) -> float:
+    """Training samples per second over ``data`` (after one warm-up step)."""
+    optimizer = torch.optim.Adam(net.parameters(), 5e-4)
+
+    def one(batch):
+        context = torch.autocast("cpu", torch.bfloat16) if autocast else contextlib.nullcontext()
+        with context:
+            logits = net(batch["images"], batch["mask"])
+        targets = encode_lights(batch["directions"], batch["intensities"])
+        loss = sum(F.cross_entropy(logits[k].float().flatten(0, 1), t.flatten())
+                   for k, t in zip(KEYS, targets))
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+
+    one(data[0])
+    start = time.perf_counter()
+    for batch in data[1:]:
+        one(batch)
+    return sum(len(b["images"]) for b in data[1:]) / (time.perf_counter() - start)
+
+
+def data_rate(dataset: LightDataset, count: int) -> float:
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    start = time.perf_counter()
+    for i in range(count):
+        dataset[i]
+    torch.set_num_threads(threads)
+    return count / (time.perf_counter() - start)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--steps", type=int, default=12)
+    parser.add_argument("--batch", type=int, nargs="+", default=[8, 16, 32])
+    parser.add_argument("--width", type=int, default=32)
+    parser.add_argument("--resolution", type=int, default=64)
+    parser.add_argument("--images", type=int, default=16)
+    args = parser.parse_args()
+    print(f"machine: {machine()}")
+    common = dict(resolution=args.resolution, images=args.images, seed=11)
+    old = LightDataset(10_000, **common)
+    new = LightDataset(10_000, shapes=dict.fromkeys(SHAPES, 1.0), layouts=dict.fromkeys(LAYOUTS, 1.0),
+                       camera=Camera(), **common)
+    print(f"data, one core: old {data_rate(old, 24):.1f} samples/s, new {data_rate(new, 24):.1f} samples/s")
+    data = batches(old, args.batch[0], args.steps)
+
+    def fresh():
+        torch.manual_seed(0)
+        return LightNet(args.width, 64)
+
+    print(f"step, batch {args.batch[0]} ({args.resolution} px, {args.images} images, width {args.width}):")
+    with mock.patch.object(network, "channels_last", lambda x: x):
+        print(f"  contiguous        {step_rate(fresh(), data):7.1f} samples/s (as trained before 2026-11-24)")
+    print(f"  channels-last     {step_rate(fresh(), data):7.1f} samples/s (as it is)")
+    print(f"  bf16 autocast     {step_rate(fresh(), data, autocast=True):7.1f} samples/s")
+    compiled = torch.compile(fresh())
+    start = time.perf_counter()
+    step_rate(compiled, data[:2])
+    compile_s = time.perf_counter() - start
+    rate = step_rate(compiled, data)
+    print(f"  torch.compile     {rate:7.1f} samples/s (compiling took {compile_s:.0f} s)")
+    for size in args.batch[1:]:
+        rate = step_rate(fresh(), batches(old, size, max(3, args.steps * args.batch[0] // size)))
+        print(f"  batch {size:<11} {rate:7.1f} samples/s")
+
+
+if __name__ == "__main__":
+    main()

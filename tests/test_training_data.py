@@ -1,0 +1,106 @@
+"""The light network's training data: shape families, light layouts and the simulated camera."""
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+import torch
+import torch.nn.functional as F
+
+from unps.errors import InputError
+from unps.io.images import read_image, write_png16
+from unps.lightnet.rig import FORMATS, LAYOUTS, Camera, draw_lights, quantize, record
+from unps.lightnet.shapes import SHAPES, sample_generator
+from unps.lightnet.synthesis import LightDataset
+
+
+def concave_share(depth: torch.Tensor, mask: torch.Tensor) -> float:
+    """Share of the mask's interior (2 px in from the outline) where the depth's Laplacian is > 0."""
+    z = depth
+    laplacian = (z[2:, 1:-1] + z[:-2, 1:-1] + z[1:-1, 2:] + z[1:-1, :-2] - 4 * z[1:-1, 1:-1])
+    inner = (-F.max_pool2d(-mask[None, None].float(), 5, 1, 2)[0, 0] > 0.5)[1:-1, 1:-1]
+    return float((laplacian[inner] > 0).float().mean())
+
+
+@pytest.mark.parametrize("family", list(SHAPES))
+def test_every_shape_family_renders_finite_unit_normals_on_a_mask(family):
+    for index in range(4):
+        maps = SHAPES[family](64, sample_generator(0, index))
+        assert maps.mask.sum() > 64 * 64 * 0.05
+        assert torch.isfinite(maps.normals).all() and torch.isfinite(maps.depth).all()
+        torch.testing.assert_close(maps.normals[maps.mask].norm(dim=-1), torch.ones(int(maps.mask.sum())))
+        assert (maps.normals[maps.mask][:, 2] > 0).all()          # seen from the camera
+        assert not maps.normals[~maps.mask].any()
+
+
+def test_vessels_are_concave_where_blobs_are_convex():
+    for index in range(6):
+        vessel = SHAPES["vessel"](64, sample_generator(0, index))
+        blob = SHAPES["blob"](64, sample_generator(0, index))
+        assert concave_share(vessel.depth, vessel.mask) > 0.15
+        assert concave_share(blob.depth, blob.mask) < 0.05
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+def test_light_layouts_give_unit_directions_toward_the_camera(layout):
+    lights = draw_lights({layout: 1.0}, 64, 60.0, sample_generator(1, 2))
+    assert lights.shape == (64, 3)
+    torch.testing.assert_close(lights.norm(dim=-1), torch.ones(64))
+    assert (lights[:, 2] > 0).all()
+    if layout == "cap":
+        assert (lights[:, 2] >= math.cos(math.radians(60)) - 1e-6).all()
+    if layout == "ring":
+        assert len(torch.unique(lights[:, 2].round(decimals=5))) <= 3
+
+
+def test_quantisation_matches_reading_the_same_data_from_files(tmp_path):
+    values = np.random.default_rng(0).random((16, 16, 3)).astype(np.float32)
+    values[0, 0] = 0.0
+    write_png16(tmp_path / "deep.png", values)
+    deep = cv2.imread(str(tmp_path / "deep.png"), cv2.IMREAD_UNCHANGED)
+    cv2.imwrite(str(tmp_path / "crop.png"), (deep // 256).astype(np.uint8))         # DiLiGenT's crops
+    cv2.imwrite(str(tmp_path / "camera.png"), np.round(values[..., ::-1] * 255).astype(np.uint8))
+    as_read = {"round16": read_image(tmp_path / "deep.png", "round"),
+               "floor8": read_image(tmp_path / "crop.png", "floor"),
+               "round8": read_image(tmp_path / "camera.png", "round")}
+    for storage, read in as_read.items():
+        np.testing.assert_allclose(quantize(torch.from_numpy(values), storage).numpy(), read,
+                                   rtol=0, atol=1e-7, err_msg=storage)
+    floor_as_round = read_image(tmp_path / "crop.png", "round")
+    assert not np.allclose(quantize(torch.from_numpy(values), "floor8").numpy(), floor_as_round)
+
+
+def test_the_camera_saturates_at_full_scale_and_stores_levels():
+    images = torch.rand(4, 3, 32, 32) * 2                      # 99th percentile near 2
+    fixed = dict(exposure=(0.0, 0.0), read_noise=0.0, shot_noise=0.0)
+    for storage in FORMATS:
+        out = record(images, Camera(**fixed, formats={storage: 1.0}), sample_generator(0, 0))
+        assert out.min() >= 0 and out.max() <= 255.5 / 255            # floor8 reads 255 as 255.5
+        assert (out[images >= 1.01] >= 254 / 255).all()       # over full scale: saturated
+        if storage == "round8":
+            torch.testing.assert_close(out * 255, (out * 255).round())
+    dim = record(images, Camera(exposure=(-2.0, -2.0), read_noise=0.0, shot_noise=0.0,
+                                formats={"round8": 1.0}), sample_generator(0, 0))
+    brightest = round(float(images.max()) * 0.01 * 255)       # two decades down: a few levels left
+    assert brightest <= 5 and float(dim.max()) == pytest.approx(brightest / 255)
+
+
+def test_a_dataset_with_every_family_layout_and_the_camera():
+    ds = LightDataset(8, resolution=64, images=8, shapes=dict.fromkeys(SHAPES, 1.0),
+                      layouts=dict.fromkeys(LAYOUTS, 1.0), camera=Camera(), seed=5)
+    for index in range(8):
+        item = ds[index]
+        assert torch.isfinite(item["images"]).all() and item["images"].max() <= 255.5 / 255
+        assert item["mask"].sum() > 0 and (item["directions"][:, 2] > 0).all()
+    forced = LightDataset(2, resolution=64, images=8, shape="vessel", seed=5)[0]
+    assert forced["mask"].sum() > 0
+
+
+def test_bad_shape_and_layout_settings():
+    with pytest.raises(InputError, match="unknown \\['teapot'\\]"):
+        LightDataset(2, resolution=32, shapes={"teapot": 1.0})
+    with pytest.raises(InputError, match="not all 0"):
+        LightDataset(2, resolution=32, layouts={"cap": 0.0})
+    with pytest.raises(InputError, match="shape family 'cube' unknown"):
+        LightDataset(2, resolution=32, shape="cube")

@@ -1,0 +1,130 @@
+"""The capture rig of the light network's training data: where the lights stand, and the camera.
+
+Light layouts copy real rigs: a uniform cap, a DiLiGenT-like dome (a grid in the image plane's
+light components), and rings at fixed zeniths. The camera exposes, adds noise, saturates at its
+full scale and stores the result the way files store it (8-bit rounded, 8-bit truncated from a
+16-bit source, 16-bit, float), so the network sees values as unps reads them from such files.
+
+Frame: x right, y up, z toward the camera.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import torch
+
+LAYOUTS = ("cap", "dome", "ring")
+FORMATS = ("float", "round8", "floor8", "round16")
+
+
+def cap_lights(count: int, max_zenith_deg: float, generator: torch.Generator) -> torch.Tensor:
+    """(count, 3) unit directions uniform over the cap within ``max_zenith_deg`` of +z."""
+    z = 1 - torch.rand(count, generator=generator) * (1 - math.cos(math.radians(max_zenith_deg)))
+    phi = 2 * math.pi * torch.rand(count, generator=generator)
+    s = torch.sqrt(1 - z ** 2)
+    return torch.stack([s * torch.cos(phi), s * torch.sin(phi), z], -1)
+
+
+def dome_lights(count: int, max_zenith_deg: float, generator: torch.Generator) -> torch.Tensor:
+    """(count, 3) directions on a jittered square grid of (l_x, l_y), as on DiLiGenT's dome: the
+    grid spans ±sin(θ) with θ between a third of ``max_zenith_deg`` and all of it, turned by a
+    random angle; the first ``count`` grid points in a random order."""
+    u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
+    side = math.ceil(math.sqrt(count))
+    reach = math.sin(math.radians(max_zenith_deg * (1 + 2 * float(u(1))) / 3)) / math.sqrt(2)
+    t = torch.linspace(-reach, reach, side)
+    grid = torch.stack(torch.meshgrid(t, t, indexing="xy"), -1).reshape(-1, 2)
+    grid = grid + (u(len(grid), 2) - 0.5) * (2 * reach / max(side - 1, 1)) * 0.3
+    turn = 2 * math.pi * float(u(1))
+    rotation = torch.tensor([[math.cos(turn), -math.sin(turn)], [math.sin(turn), math.cos(turn)]])
+    planar = (grid @ rotation.T)[torch.randperm(len(grid), generator=generator)[:count]]
+    norm = planar.norm(dim=-1, keepdim=True)
+    planar = planar * (norm.clamp(max=0.999) / norm.clamp_min(1e-9))   # the jitter may reach past 90°
+    return torch.cat([planar, torch.sqrt(1 - (planar ** 2).sum(-1, keepdim=True))], -1)
+
+
+def ring_lights(count: int, max_zenith_deg: float, generator: torch.Generator) -> torch.Tensor:
+    """(count, 3) directions on one to three rings, each at a zenith between 10° and
+    ``max_zenith_deg`` with evenly spaced azimuths (a random phase each)."""
+    u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
+    rings = int(1 + 3 * float(u(1)))
+    sizes = [count // rings + (i < count % rings) for i in range(rings)]
+    out = []
+    for size in sizes:
+        zenith = math.radians(10 + (max_zenith_deg - 10) * float(u(1)))
+        phi = 2 * math.pi * (torch.arange(size) / size + float(u(1)))
+        out.append(torch.stack([math.sin(zenith) * torch.cos(phi), math.sin(zenith) * torch.sin(phi),
+                                torch.full((size,), math.cos(zenith))], -1))
+    return torch.cat(out)[torch.randperm(count, generator=generator)]
+
+
+def draw_lights(weights: dict[str, float], count: int, max_zenith_deg: float,
+                generator: torch.Generator) -> torch.Tensor:
+    """(count, 3) unit directions from one of :data:`LAYOUTS`, drawn by weight."""
+    names = [name for name in LAYOUTS if weights.get(name, 0) > 0]
+    p = torch.tensor([weights[name] for name in names], dtype=torch.float64)
+    name = names[0] if len(names) == 1 else \
+        names[int(torch.multinomial(p / p.sum(), 1, generator=generator))]   # one: no draw
+    layout = {"cap": cap_lights, "dome": dome_lights, "ring": ring_lights}[name]
+    return layout(count, max_zenith_deg, generator)
+
+
+@dataclass(frozen=True)
+class Camera:
+    """How the simulated camera records a stack.
+
+    Args:
+        exposure: range of log10 of the level (full scale 1) that the stack's 99th percentile
+            reaches; (−2, 0) spans two decades, from dim captures to a full-scale one.
+        read_noise: largest standard deviation of the additive noise, in full-scale units.
+        shot_noise: largest photon-noise factor g: the variance adds g · value.
+        formats: weights of the storage formats in :data:`FORMATS`.
+    """
+
+    exposure: tuple[float, float] = (-2.0, 0.0)
+    read_noise: float = 0.002
+    shot_noise: float = 0.002
+    formats: dict[str, float] = field(default_factory=lambda: {
+        "float": 1.0, "round8": 1.0, "floor8": 1.0, "round16": 1.0})
+
+
+def quantize(values: torch.Tensor, storage: str) -> torch.Tensor:
+    """Values in [0, 1] full scale as unps reads them back from a file of that format.
+
+    ``round8`` and ``round16`` round to 255 or 65535 levels (read as ``quantization=round``);
+    ``floor8`` truncates a 16-bit value to its top 8 bits, as DiLiGenT's crops were made, and
+    reads level k > 0 as k + ½ (``quantization=floor``, :func:`unps.io.images.read_image`);
+    ``float`` keeps them.
+    """
+    if storage == "float":
+        return values
+    if storage == "round8":
+        return torch.round(values * 255) / 255
+    if storage == "round16":
+        return torch.round(values * 65535) / 65535
+    if storage == "floor8":
+        levels = torch.floor(torch.round(values * 65535) / 256)
+        return (levels + 0.5 * (levels > 0)) / 255
+    raise ValueError(f"storage must be one of {FORMATS}, got {storage!r}")
+
+
+def record(images: torch.Tensor, camera: Camera, generator: torch.Generator) -> torch.Tensor:
+    """A stack scaled to a 99th percentile of 1, as the camera stores it.
+
+    Args:
+        images: (n, 3, H, W) radiance, 99th percentile of the object's values 1.
+
+    Returns:
+        (n, 3, H, W) in [0, 1]: exposed, noisy, clipped at full scale and quantised.
+    """
+    u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
+    low, high = camera.exposure
+    values = images * 10 ** (low + (high - low) * float(u(1)))
+    sigma = torch.sqrt(camera.shot_noise * float(u(1)) * values.clamp_min(0)
+                       + (camera.read_noise * float(u(1))) ** 2)
+    values = (values + sigma * torch.randn(values.shape, generator=generator)).clamp(0, 1)
+    names = [name for name in FORMATS if camera.formats.get(name, 0) > 0]
+    p = torch.tensor([camera.formats[name] for name in names], dtype=torch.float64)
+    return quantize(values, names[int(torch.multinomial(p / p.sum(), 1, generator=generator))])
