@@ -26,10 +26,10 @@ def test_valid_subject_defaults():
 @pytest.mark.parametrize("kw, message", [
     (dict(mask=np.zeros((6, 5), bool)), "mask is empty"),
     (dict(mask=np.ones((5, 5), bool)), "mask has shape (5, 5), expected the image size (6, 5)"),
-    (dict(light_directions=np.array([[0, 0, 1.0]] * 3 + [[np.nan, 0, 1]])), "light direction 3 is not finite"),
-    (dict(light_directions=np.array([[0, 0, 1.0]] * 3 + [[0, 0, 0]])), "light direction 3 has zero length"),
+    (dict(light_directions=np.array([[0, 0, 1.0]] * 3 + [[np.nan, 0, 1]])), "light direction in row 4 (of 4) is not finite"),
+    (dict(light_directions=np.array([[0, 0, 1.0]] * 3 + [[0, 0, 0]])), "light direction in row 4 (of 4) has zero length"),
     (dict(light_directions=np.zeros((3, 3)) + [0, 0, 1]), "expected 4 light directions"),
-    (dict(light_intensities=np.array([[1, 1, 1.0]] * 3 + [[1, 0, 1]])), "must be finite and > 0; row 3"),
+    (dict(light_intensities=np.array([[1, 1, 1.0]] * 3 + [[1, 0, 1]])), "must be finite and > 0; row 4 (of 4)"),
     (dict(normals=np.zeros((6, 4, 3))), "ground-truth normals have shape (6, 4, 3), expected (6, 5, 3)"),
     (dict(depth=np.zeros((2, 2))), "ground-truth depth has shape"),
     (dict(images=np.full((4, 6, 5, 3), np.inf, np.float32)), "images contain NaN or Inf"),

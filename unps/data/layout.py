@@ -70,10 +70,27 @@ def read_filenames(path: Path) -> list[str]:
 
 
 def read_matrix(path: Path, what: str) -> np.ndarray:
+    """A text file of whitespace-separated numbers as a 2-D array (``#`` starts a comment)."""
     try:
         return np.loadtxt(path, ndmin=2)
-    except ValueError as e:
-        raise InputError(f"{path}: cannot parse {what} as rows of numbers ({e})") from None
+    except ValueError:
+        raise InputError(f"{path}: cannot parse {what} as rows of numbers ({first_misfit(path)})") from None
+
+
+def first_misfit(path: Path) -> str:
+    """Where a text file stops being rows of numbers, as a text editor counts (from 1)."""
+    widths = set()
+    for number, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
+        words = line.split("#")[0].split()
+        for column, word in enumerate(words, 1):
+            try:
+                float(word)
+            except ValueError:
+                return f"line {number}, column {column}: {word!r} is not a number"
+        if words and widths and len(words) not in widths:
+            return f"line {number} has {len(words)} values, the lines before {widths.pop()}"
+        widths.update([len(words)] if words else [])
+    return "unreadable"
 
 
 def read_layout(root: Path, filenames: list[str], mask_file: Path, require_mask: bool,

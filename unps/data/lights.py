@@ -55,15 +55,16 @@ def check_light_directions(directions, n_images: int, source: str) -> np.ndarray
                          f"image), got an array of shape {d.shape}")
     bad = ~np.isfinite(d).all(axis=1)
     if bad.any():
-        raise InputError(f"{source}: light direction {int(np.argmax(bad))} is not finite: "
-                         f"{d[bad][0].tolist()}")
+        raise InputError(f"{source}: the light direction in row {int(np.argmax(bad)) + 1} (of "
+                         f"{n_images}) is not finite: {d[bad][0].tolist()}")
     norm = np.linalg.norm(d, axis=1)
     if (norm < 1e-8).any():
-        raise InputError(f"{source}: light direction {int(np.argmax(norm < 1e-8))} has zero length")
+        raise InputError(f"{source}: the light direction in row {int(np.argmax(norm < 1e-8)) + 1} "
+                         f"(of {n_images}) has zero length")
     off = np.abs(norm - 1) > UNIT_TOLERANCE
     if off.any():
         log.warning("%s: %d light directions are not unit length (e.g. row %d, |l| = %.4f); "
-                    "normalising them", source, off.sum(), int(np.argmax(off)), norm[off][0])
+                    "normalising them", source, off.sum(), int(np.argmax(off)) + 1, norm[off][0])
     return (d / norm[:, None]).astype(np.float32)
 
 
@@ -78,5 +79,5 @@ def check_light_intensities(intensities, n_images: int, source: str) -> np.ndarr
     bad = ~(np.isfinite(e) & (e > 0)).all(axis=1)
     if bad.any():
         raise InputError(f"{source}: light intensities must be finite and > 0; row "
-                         f"{int(np.argmax(bad))} is {e[bad][0].tolist()}")
+                         f"{int(np.argmax(bad)) + 1} (of {n_images}) is {e[bad][0].tolist()}")
     return e.astype(np.float32)
