@@ -11,7 +11,8 @@ import torch
 from lightning.pytorch.utilities import rank_zero_only
 
 from unps.geometry import integrate_normals
-from unps.io.pictures import error_rgb, normal_rgb
+from unps.io.pictures import error_rgb, normal_rgb, to_display
+from unps.metrics import angular_error
 from unps.timing import stage
 
 log = logging.getLogger("unps.inverse.fit")
@@ -28,9 +29,7 @@ def depth_rgb(depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
 
 def side_by_side(observed: np.ndarray, reconstructed: np.ndarray) -> np.ndarray:
     """Two (H, W, 3) images on one scale (the observed 99th percentile) → (H, 2W, 3) uint8."""
-    level = max(float(np.percentile(observed, 99)), 1e-12)
-    both = np.concatenate([observed, reconstructed], 1) / level
-    return (np.round(np.clip(both, 0, 1) * 255)).astype(np.uint8)
+    return to_display(np.concatenate([observed, reconstructed], 1), observed)
 
 
 class FitPictures(L.Callback):
@@ -59,15 +58,15 @@ class FitPictures(L.Callback):
                          dataformats="HWC")
         if module.true_normals is not None:
             truth = module.true_normals[0].permute(1, 2, 0).cpu().numpy()
-            error = np.degrees(np.arccos(np.clip((normals * truth).sum(-1), -1, 1)))
+            error = angular_error(normals, truth)
             writer.add_image("fit/error_0_45deg", error_rgb(error, mask), step, dataformats="HWC")
         observed = out["observed"][0].permute(1, 2, 0).cpu().numpy() * mask[..., None]
         reconstructed = out["reconstruction"][0].permute(1, 2, 0).cpu().numpy() * mask[..., None]
         writer.add_image("fit/observed_vs_reconstructed", side_by_side(observed, reconstructed), step,
                          dataformats="HWC")
         reflectance = out["reflectance"][0].permute(1, 2, 0).cpu().numpy() * mask[..., None]
-        level = max(float(np.percentile(reflectance[mask], 99)), 1e-12)
-        writer.add_image("fit/reflectance", np.clip(reflectance / level, 0, 1), step, dataformats="HWC")
+        writer.add_image("fit/reflectance", to_display(reflectance, reflectance[mask]), step,
+                         dataformats="HWC")
 
 
 class ProgressLog(L.Callback):

@@ -12,6 +12,20 @@ import numpy as np
 ERROR_RANGE_DEG = 45.0
 
 
+def to_display(values: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """Values as uint8 on the display scale of ``reference``: its 99th percentile is white.
+
+    Args:
+        values: any shape, linear; reference: the values that set the scale (e.g. the observed
+            images on the object).
+
+    >>> to_display(np.array([0.0, 0.5, 1.0, 2.0]), np.array([1.0])).tolist()
+    [0, 128, 255, 255]
+    """
+    level = max(float(np.percentile(reference, 99)), 1e-12)
+    return np.round(np.clip(values / level, 0, 1) * 255).astype(np.uint8)
+
+
 def normal_rgb(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """The usual normal-map colours: RGB = (n + 1) / 2, so x → red, y → green, z → blue."""
     rgb = np.round((np.clip(normals, -1, 1) + 1) * 127.5)

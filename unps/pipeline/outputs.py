@@ -13,8 +13,8 @@ from unps.geometry import depth_to_mesh
 from unps.io.files import atomic_path, write_json, write_npy
 from unps.io.images import write_png8
 from unps.io.mesh import write_ply
-from unps.io.pictures import (albedo_rgb, error_figure_png, error_rgb, labelled_rows, lights_figure_png,
-                               normal_rgb)
+from unps.io.pictures import (albedo_rgb, error_figure_png, error_rgb, labelled_rows,
+                              lights_figure_png, normal_rgb, to_display)
 from unps.lights import Lights, write_lights
 
 log = logging.getLogger(__name__)
@@ -93,15 +93,13 @@ def write_rendering(out: Path, rendering: Rendering) -> None:
     picks = np.unique(np.linspace(0, n - 1, min(n, 6)).round().astype(int))
     mask = rendering.mask[..., None]
     observed, reconstructed = rendering.observed[picks] * mask, rendering.reconstruction[picks] * mask
-    level = max(float(np.percentile(observed[:, rendering.mask], 99)), 1e-12)
-    rows = [np.round(np.clip(np.concatenate(list(r), 1) / level, 0, 1) * 255).astype(np.uint8)
+    rows = [to_display(np.concatenate(list(r), 1), observed[:, rendering.mask])
             for r in (observed, reconstructed, np.abs(observed - reconstructed))]
     write_png8(out / "reconstruction.png",
                labelled_rows(rows, ["observed", "reconstructed", "|difference|"]))
     reflectance = rendering.reflectance[picks] * mask
-    level = max(float(np.percentile(reflectance[:, rendering.mask], 99)), 1e-12)
-    sheet = np.concatenate(list(reflectance), 1) / level
-    write_png8(out / "reflectance.png", np.round(np.clip(sheet, 0, 1) * 255).astype(np.uint8))
+    write_png8(out / "reflectance.png",
+               to_display(np.concatenate(list(reflectance), 1), reflectance[:, rendering.mask]))
 
 
 def _write_tensorboard(folder: Path, subject: Subject, estimate: Estimate,

@@ -1,0 +1,50 @@
+"""A picture of the light network's training data: each shape family, its normals and stacks.
+
+    python experiments/light_estimation/training_data.py      # writes training_data.png beside this file
+
+Rows: the shape families of ``unps.lightnet.shapes.SHAPES``. Columns: the normal maps of three
+samples (RGB = (n + 1) / 2), then the first image of three stacks drawn as the default training
+data draws them (every light layout, analytic materials, the simulated camera), each scaled to
+its own maximum.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from unps.lightnet.rig import LAYOUTS, Camera  # noqa: E402
+from unps.lightnet.shapes import SHAPES, sample_generator  # noqa: E402
+from unps.lightnet.synthesis import LightDataset  # noqa: E402
+
+SAMPLES = 3
+
+
+def main() -> None:
+    fig, axes = plt.subplots(len(SHAPES), 2 * SAMPLES, figsize=(2 * SAMPLES * 1.6, len(SHAPES) * 1.7))
+    for row, name in enumerate(SHAPES):
+        stacks = LightDataset(SAMPLES, resolution=128, images=4, shape=name, seed=1,
+                              layouts=dict.fromkeys(LAYOUTS, 1.0), camera=Camera())
+        for k in range(SAMPLES):
+            maps = SHAPES[name](128, sample_generator(0, k))
+            axes[row, k].imshow(((maps.normals + 1) / 2 * maps.mask[..., None]).numpy())
+            image = stacks[k]["images"][0].permute(1, 2, 0).numpy()
+            axes[row, SAMPLES + k].imshow(np.clip(image / max(float(image.max()), 1e-6), 0, 1))
+        axes[row, 0].set_ylabel(name)
+    axes[0, 1].set_title("normals")
+    axes[0, SAMPLES + 1].set_title("through the simulated camera")
+    for ax in axes.flat:
+        ax.set_xticks([]), ax.set_yticks([])
+    fig.tight_layout()
+    out = Path(__file__).with_name("training_data.png")
+    fig.savefig(out, dpi=80)
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()
