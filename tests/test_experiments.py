@@ -265,12 +265,21 @@ def test_notebook_runs_at_tiny_size(tmp_path):
 
 
 def load_script(name, relative):
+    """Import a script by path; it is registered under ``name`` while it runs (dataclasses need it)."""
     import importlib.util
+    import sys
     spec = importlib.util.spec_from_file_location(name, Path(__file__).parents[1] / relative)
     module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    previous = sys.modules.get(name)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    finally:
+        if previous is None:
+            del sys.modules[name]
+        else:
+            sys.modules[name] = previous
     return module
-
 
 
 @pytest.mark.parametrize("script", sorted(str(p.relative_to(Path(__file__).parents[1]))

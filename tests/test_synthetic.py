@@ -9,6 +9,7 @@ from hydra import compose, initialize_config_module
 from hydra.utils import instantiate
 
 import unps.synthetic.scenes as scenes
+from unps.data.catalogue import subjects
 from unps.data.analytic import render_lambertian
 from unps.data.prepare import add_noise
 from unps.errors import InputError
@@ -16,7 +17,7 @@ from unps.fit import fit
 from unps.synthetic import shapes
 from unps.synthetic.render import light_dome, render_subject
 
-SUBJECTS = ["Vase", "Golf-ball", "Face", "Tablet1", "Tablet2", "BrokenPot", "Rose", "Sphere"]
+SUBJECTS = list(subjects("synthetic"))
 TINY = ["subject.render.resolution=24", "subject.render.spp=4", "subject.lights.count=3"]
 
 

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from unps.data.catalogue import subjects
 from unps.data.diligent import read_diligent_object
 from unps.errors import InputError
 from unps.lightnet.estimate import network_estimate
@@ -34,7 +35,7 @@ from unps.solvers.rpca import robust_init
 
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
 DILIGENT = ("ball", "cat", "pot1")
-RENDERED = ("Face", "Golf-ball", "Tablet1", "Tablet2", "Vase", "BrokenPot", "Rose", "Sphere")
+RENDERED = subjects("synthetic")
 
 
 def load(name: str, data: Path):

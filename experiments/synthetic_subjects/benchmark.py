@@ -25,6 +25,7 @@ from hydra import compose, initialize_config_module
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
+from unps.data.catalogue import subjects
 from unps.data.diligent import read_diligent
 from unps.data.prepare import prepare
 from unps.io.images import write_png8
@@ -36,7 +37,7 @@ from unps.solvers.woodham import woodham
 from unps.synthetic.render import light_dome, render_subject
 from unps.synthetic.scenes import cached_render
 
-SUBJECTS = ["Vase", "Golf-ball", "Face", "Tablet1", "Tablet2", "BrokenPot", "Rose", "Sphere"]
+SUBJECTS = list(subjects("synthetic"))
 
 
 def monte_carlo_noise(spec, reference: float) -> float:

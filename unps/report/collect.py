@@ -2,18 +2,19 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 import json
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
+from unps.data.catalogue import subjects
 from unps.errors import InputError
 
-SYNTHETIC = ("Vase", "Golf-ball", "Face", "Tablet1", "Tablet2", "BrokenPot", "Rose", "Sphere")
+SYNTHETIC = subjects("synthetic")
 
-DILIGENT = ("ball", "bear", "buddha", "cat", "cow", "goblet", "harvest", "pot1", "pot2", "reading")
+DILIGENT = subjects("diligent")
 
 PAPER_SUBJECTS = SYNTHETIC[:6]
 
