@@ -1,3 +1,4 @@
+import logging
 import math
 
 import numpy as np
@@ -170,6 +171,14 @@ def test_two_step_training_writes_checkpoints_and_metrics(trained):
     assert metrics["steps"] == 2 and np.isfinite(metrics["val/direction_mae"])
     assert (out / "checkpoints" / "last.ckpt").is_file() and (out / "metrics.json").is_file()
     assert list((out / "tensorboard").glob("events.out.tfevents.*"))
+
+
+def test_training_logs_a_progress_line(tmp_path, caplog):
+    caplog.set_level(logging.INFO)
+    train(train_config(tmp_path, "recipe.max_steps=4"))       # validation after step 2
+    lines = [r.getMessage() for r in caplog.records]
+    assert any(line.startswith("training LightNet on") for line in lines)
+    assert any(line.startswith("step 4/4: loss ") and "validation direction error" in line for line in lines)
 
 
 def test_checkpoint_restores_the_same_network(trained):

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import time
+import warnings
 from pathlib import Path
 
 import hydra
@@ -22,6 +23,9 @@ from omegaconf import DictConfig, OmegaConf
 from unps.errors import InputError, exit_on_bad_input
 
 log = logging.getLogger("unps.train")
+
+PROGRESS_EVERY = 250   # steps between progress lines
+PROGRESS = (("loss", "train/loss", "{:.3f}"), ("validation direction error", "val/direction_mae", "{:.2f}°"))
 
 
 def initial_weights(path: str, cfg: DictConfig):
@@ -42,6 +46,8 @@ def train(cfg: DictConfig) -> dict:
     import lightning as L
     from lightning.pytorch.callbacks import LearningRateMonitor, ModelCheckpoint
     from lightning.pytorch.loggers import TensorBoardLogger
+    from unps.inverse.callbacks import ProgressLog
+    from unps.inverse.control import LIGHTNING_NOISE
     from unps.io.files import write_json
     from unps.lightnet.callbacks import LightSamples
     from unps.lightnet.data import LightData
@@ -78,11 +84,18 @@ def train(cfg: DictConfig) -> dict:
         callbacks=[ModelCheckpoint(dirpath=out / "checkpoints", save_last=True,
                                    monitor="val/direction_mae", mode="min", save_top_k=1,
                                    filename="best"),
-                   LightSamples(), LearningRateMonitor()],
+                   LightSamples(), LearningRateMonitor(), ProgressLog(PROGRESS_EVERY, PROGRESS, log)],
         accelerator="auto", devices=1, log_every_n_steps=cfg.recipe.log_every,
-        enable_progress_bar=True, deterministic=False)
+        enable_progress_bar=False, enable_model_summary=False, deterministic=False)
+    log.info("training %s on %d threads: %d steps of %d samples (%d px, %d images), at most %s; "
+             "run folder %s", type(net).__name__, torch.get_num_threads(), cfg.recipe.max_steps,
+             cfg.recipe.batch_size, cfg.recipe.resolution, cfg.recipe.images,
+             cfg.recipe.max_time or "no time limit", out)
     start = time.perf_counter()
-    trainer.fit(system, datamodule=data, ckpt_path=cfg.ckpt_path or None)
+    with warnings.catch_warnings():
+        for message in LIGHTNING_NOISE:
+            warnings.filterwarnings("ignore", message=message)
+        trainer.fit(system, datamodule=data, ckpt_path=cfg.ckpt_path or None)
     metrics = {k: float(v) for k, v in trainer.callback_metrics.items()}
     metrics.update(train_seconds=time.perf_counter() - start, steps=trainer.global_step)
     write_json(out / "metrics.json", metrics)
@@ -92,6 +105,9 @@ def train(cfg: DictConfig) -> dict:
 @hydra.main(version_base="1.3", config_path="pkg://unps.conf", config_name="train")
 @exit_on_bad_input
 def main(cfg: DictConfig) -> None:
+    import lightning.pytorch   # noqa: F401  (it sets its own logger to INFO when imported)
+
+    logging.getLogger("lightning.pytorch").setLevel(logging.WARNING)   # no accelerator lines, no adverts
     train(cfg)
 
 

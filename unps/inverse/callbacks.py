@@ -74,8 +74,12 @@ class ProgressLog(L.Callback):
     known, seconds per step and time left. Readable in a terminal and in the run's log file,
     where a progress bar is not."""
 
-    def __init__(self, every: int = 100):
-        self.every = every
+    FIT = (("loss", "loss/reconstruction", "{:.4f}"), ("normal error", "mae", "{:.2f}°"))
+
+    def __init__(self, every: int = 100, shown: tuple[tuple[str, str, str], ...] = FIT,
+                 logger: logging.Logger = log):
+        """``shown``: (label, logged metric, format) of each figure on the line, when logged."""
+        self.every, self.shown, self._log = every, shown, logger
         self._start: float | None = None
         self._first_step = 0
 
@@ -90,11 +94,9 @@ class ProgressLog(L.Callback):
         done = step - self._first_step
         per_step = (time.perf_counter() - self._start) / max(done, 1)
         metrics = trainer.callback_metrics
-        loss = metrics.get("loss/reconstruction")
-        shown = [f"loss {float(loss):.4f}"] if loss is not None else []
-        if "mae" in metrics:
-            shown.append(f"normal error {float(metrics['mae']):.2f}°")
-        log.info("step %d/%d: %s (%.3f s/step, %s left)", step, trainer.max_steps, ", ".join(shown),
+        shown = [f"{label} {form.format(float(metrics[key]))}" for label, key, form in self.shown
+                 if key in metrics]
+        self._log.info("step %d/%d: %s (%.3f s/step, %s left)", step, trainer.max_steps, ", ".join(shown),
                  per_step, duration(per_step * (trainer.max_steps - step)))
 
 
