@@ -2,6 +2,7 @@
 
     python experiments/light_estimation/throughput.py                 # the recipe=cpu sizes
     python experiments/light_estimation/throughput.py --steps 20 --batch 8 16 32
+    python experiments/light_estimation/throughput.py --pipeline 27cc432   # whole runs, before and now
 
 Prints, for fixed pre-generated batches of the CPU recipe (64 px, 16 images, width 32), the
 training step (forward, backward, Adam) in samples per second for: contiguous tensors (as
@@ -9,13 +10,22 @@ before), channels-last (as it is), bf16 autocast, ``torch.compile`` (inductor; i
 time apart), and larger batches; and the data generation in samples per second on one core,
 for the old data (blobs, cap of lights, perturbation) and the new (every shape family and
 light layout, the simulated camera).
+
+With ``--pipeline <rev>``, whole ``python -m unps.train`` runs instead (``--run-steps`` steps of
+the CPU recipe, no validation), from the code at ``<rev>`` with its data and from this checkout
+with the new data, at the recipe's data worker and thread settings and at the alternatives; it
+prints samples per second of the whole run (data, step, logging and checkpoints).
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import json
+import os
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 from unittest import mock
@@ -24,6 +34,7 @@ import torch
 import torch.nn.functional as F
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "speed"))
+from compare import worktree  # noqa: E402
 from stages import machine  # noqa: E402
 
 from unps.lightnet.bins import encode_lights
@@ -73,6 +84,34 @@ def data_rate(dataset: LightDataset, count: int) -> float:
     return count / (time.perf_counter() - start)
 
 
+REPO = Path(__file__).resolve().parents[2]
+SETTINGS = {"recipe (1 data worker, 2 threads)": [],
+            "no data worker, 2 threads": ["recipe.workers=0"],
+            "1 data worker, 1 thread": ["recipe.threads=1"]}
+
+
+def run_rate(source: Path, steps: int, overrides: list[str]) -> float:
+    """Samples per second of one ``python -m unps.train`` run of ``steps`` steps from ``source``."""
+    with tempfile.TemporaryDirectory() as out:
+        command = [sys.executable, "-m", "unps.train", f"hydra.run.dir={out}", f"recipe.max_steps={steps}",
+                   f"recipe.val_every={steps}", "recipe.val_samples=8", "recipe.max_time=null", *overrides]
+        done = subprocess.run(command, cwd=source, env={**os.environ, "PYTHONPATH": str(source)},
+                              capture_output=True, text=True)
+        if done.returncode:
+            raise SystemExit(f"{' '.join(command)} (from {source}) failed:\n{done.stderr[-2000:]}")
+        metrics = json.loads((Path(out) / "metrics.json").read_text())
+    return metrics["steps"] * 8 / metrics["train_seconds"]
+
+
+def pipeline(before: str, steps: int) -> None:
+    old = worktree(before, Path(tempfile.gettempdir()) / "unps-throughput")
+    print(f"whole training runs, {steps} steps of 8 samples (64 px, 16 images, width 32):")
+    print(f"  {before} (blobs, contiguous), recipe   {run_rate(old, steps, []):6.1f} samples/s")
+    for label, overrides in SETTINGS.items():
+        rate = run_rate(REPO, steps, overrides)
+        print(f"  now (new data, channels-last), {label:<34} {rate:6.1f} samples/s", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -81,8 +120,13 @@ def main() -> None:
     parser.add_argument("--width", type=int, default=32)
     parser.add_argument("--resolution", type=int, default=64)
     parser.add_argument("--images", type=int, default=16)
+    parser.add_argument("--pipeline", metavar="REV", help="time whole runs against this revision")
+    parser.add_argument("--run-steps", type=int, default=200)
     args = parser.parse_args()
     print(f"machine: {machine()}")
+    if args.pipeline:
+        pipeline(args.pipeline, args.run_steps)
+        return
     common = dict(resolution=args.resolution, images=args.images, seed=11)
     old = LightDataset(10_000, **common)
     new = LightDataset(10_000, shapes=dict.fromkeys(SHAPES, 1.0), layouts=dict.fromkeys(LAYOUTS, 1.0),
