@@ -10,7 +10,7 @@ from hydra import compose, initialize_config_module
 from unps.data.analytic import render_lambertian
 from unps.errors import Diverged, InputError
 from unps.fit import fit
-from unps.inverse.fit import Preset, interreflection_bend, neural_inverse_rendering
+from unps.inverse.fit import InterreflectionModel, Preset, interreflection_bend, neural_inverse_rendering
 from unps.inverse.grids import unclipped, upsample_normals, upsample_with_detail, working_factor
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet, normal_net_input, shading, specular_map
@@ -19,7 +19,7 @@ from unps.metrics import angular_error
 
 TINY = dict(name="tiny", width=16, depth=3, first_kernel=1, reflectance_width=8, steps=20,
             lr_drop_at=18, images_per_step=8, update_every=10)
-NAYAR = dict(enabled=True, downsample=2, occlusion=True, albedo=None)
+NAYAR = dict(downsample=2, occlusion=True, albedo=None)
 
 
 def config(tmp_path, *overrides):
@@ -160,7 +160,8 @@ def test_detail_is_added_to_the_upsampled_fit():
 
 def test_a_fit_on_a_coarser_working_grid_returns_full_resolution_normals(sphere):
     estimate = neural_inverse_rendering(sphere, sphere.light_directions,
-                                        {**TINY, "max_pixels": sphere.mask.sum() // 3}, NAYAR)
+                                        Preset.from_config(**TINY, max_pixels=int(sphere.mask.sum()) // 3),
+                                        InterreflectionModel(**NAYAR))
     assert estimate.info["fit_downsample"] == 2
     assert estimate.normals.shape == sphere.normals.shape
     np.testing.assert_allclose(np.linalg.norm(estimate.normals[sphere.mask], axis=-1), 1, atol=1e-5)
@@ -173,7 +174,7 @@ def sphere_system(prior_weight):
     images = torch.as_tensor(subject.images / subject.images[:, subject.mask].mean()).permute(0, 3, 1, 2)
     flat = np.zeros(subject.mask.shape + (3,), np.float32)
     flat[..., 2] = 1
-    preset = Preset.from_config({**TINY, "prior_weight": prior_weight, "pixel_keep": 1.0})
+    preset = Preset.from_config(**{**TINY, "prior_weight": prior_weight, "pixel_keep": 1.0})
     return InverseRendering(
         NormalNet(12, 16, 3, 1), ReflectanceNet(16, 8), images, subject.mask,
         torch.as_tensor(subject.light_directions), torch.as_tensor(flat).permute(2, 0, 1), None,
@@ -265,8 +266,8 @@ def test_refined_lights_are_reported_and_need_method_unps(tmp_path):
 
 def test_interreflection_off_and_in_memory_fits(sphere):
     for enabled in (False, True):
-        estimate = neural_inverse_rendering(sphere, sphere.light_directions, TINY,
-                                            {**NAYAR, "enabled": enabled})
+        estimate = neural_inverse_rendering(sphere, sphere.light_directions, Preset.from_config(**TINY),
+                                            InterreflectionModel(**NAYAR, enabled=enabled))
         mae = angular_error(estimate.normals, sphere.normals)[sphere.mask].mean()
         assert estimate.normals.shape == sphere.normals.shape and mae < 30
         info = estimate.info

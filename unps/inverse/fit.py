@@ -64,23 +64,49 @@ class Preset:
     schedule: Schedule = Schedule()
 
     @classmethod
-    def from_config(cls, fields: dict) -> Preset:
-        """From the flat ``preset`` config node: :class:`Schedule`'s keys go to ``schedule``."""
+    def from_config(cls, **fields) -> Preset:
+        """From the flat ``preset`` config node (its ``_target_``): :class:`Schedule`'s keys go
+        to ``schedule``."""
         timing = {f.name for f in dataclasses.fields(Schedule)}
         return cls(**{k: v for k, v in fields.items() if k not in timing},
                    schedule=Schedule(**{k: v for k, v in fields.items() if k in timing}))
 
+    def fields(self) -> dict:
+        """The flat fields again, as the config node has them."""
+        flat = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "schedule"}
+        return {**flat, **dataclasses.asdict(self.schedule)}
 
-def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, preset: dict,
-                             interreflection: dict, refine_lights: bool = False,
+
+@dataclass(frozen=True)
+class InterreflectionModel:
+    """How ``method=unps`` renders interreflections (``interreflection=nayar|…|off``).
+
+    Attributes:
+        name: label.
+        enabled: render with Nayar's pseudo-normals N_ny (else with N_o).
+        downsample: facet grid factor of the kernel.
+        occlusion: visibility between facets in the kernel.
+        albedo: the object's median diffuse reflectance, to scale P; None takes the robust
+            initialisation's albedo as a reflectance.
+    """
+
+    name: str = "nayar"
+    enabled: bool = True
+    downsample: int = 4
+    occlusion: bool = True
+    albedo: float | None = None
+
+
+def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, preset: Preset,
+                             interreflection: InterreflectionModel, refine_lights: bool = False,
                              output_dir: str | Path | None = None) -> Estimate:
     """Fit the inverse-rendering networks to one subject.
 
     Args:
         subject: images divided by their intensities.
         light_directions: (n, 3) unit, surface to light (estimated or calibrated).
-        preset: :class:`Preset` fields.
-        interreflection: ``enabled`` (bool), ``downsample`` (facet grid factor), ``occlusion``.
+        preset: sizes and schedule.
+        interreflection: the interreflection model.
         refine_lights: learn the lights jointly, starting from ``light_directions``.
         output_dir: run folder for checkpoints (resumed from when present) and TensorBoard;
             None keeps everything in memory.
@@ -89,9 +115,8 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
         Normals and albedo on the subject's grid, the refined lights when ``refine_lights``, the
         per-image maps on the working grid and the fit's figures in ``info``.
     """
-    settings = {"preset": dict(preset), "interreflection": dict(interreflection),
+    settings = {"preset": preset.fields(), "interreflection": dataclasses.asdict(interreflection),
                 "refine_lights": refine_lights}
-    preset = Preset.from_config(preset)
     schedule = preset.schedule
     cropped = subject.crop_to_mask(CROP_MARGIN)
     factor = working_factor(int(cropped.mask.sum()), preset.max_pixels)
@@ -133,7 +158,7 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
     info = {"fit_resolution": [h, w], "fit_downsample": factor, "fit_steps": schedule.steps,
             "fit_s_per_step": seconds / max(steps_run, 1), "resumed_from_step": resumed_from,
             "parameters": parameters, "facets": solver.n_facets if solver else 0, "preset": preset.name,
-            "interreflection": bool(interreflection["enabled"]),
+            "interreflection": interreflection.enabled,
             "facet_downsample": solver.factor if solver else None,
             "interreflection_bend_deg": bend["mean"] if bend else None}
     rendering = Rendering(work.mask, work.images, rendering["reconstruction"], rendering["reflectance"])
@@ -141,7 +166,8 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
                     light_scales=scales if refine_lights else None, rendering=rendering, info=info)
 
 
-def build_system(work: Subject, light_directions: np.ndarray, preset: Preset, interreflection: dict,
+def build_system(work: Subject, light_directions: np.ndarray, preset: Preset,
+                 interreflection: InterreflectionModel,
                  refine_lights: bool, run_fingerprint: str, usable: np.ndarray | None = None
                  ) -> tuple[InverseRendering, float]:
     """The robust initialisation, the networks and the interreflection solve for the working grid,
@@ -160,12 +186,11 @@ def build_system(work: Subject, light_directions: np.ndarray, preset: Preset, in
     images = torch.as_tensor(work.images / scale).permute(0, 3, 1, 2).contiguous()
 
     solver = None
-    if interreflection["enabled"]:
-        stated = interreflection["albedo"]
+    if interreflection.enabled:
+        stated = interreflection.albedo
         albedo = init.albedo.mean(-1)
         albedo = albedo * reflectance_scale(albedo[mask], stated)
-        solver = Interreflection(mask, albedo, interreflection["downsample"],
-                                 interreflection["occlusion"])
+        solver = Interreflection(mask, albedo, interreflection.downsample, interreflection.occlusion)
         log.info("interreflections: %d facets (×%d), median reflectance %.3f (%s)", solver.n_facets,
                  solver.factor, float(solver.albedo.median()),
                  "the robust initialisation's albedo" if stated is None
