@@ -73,3 +73,12 @@ def test_align_to_contour_keeps_lights_that_are_off_by_less_than_it_can_tell():
     estimate = Lights((sphere.light_directions @ turn.T).astype(np.float32), sphere.light_intensities,
                       "estimated")
     np.testing.assert_array_equal(align_to_contour(sphere, estimate).directions, estimate.directions)
+
+
+def test_align_to_contour_keeps_lights_it_would_turn_by_more_than_it_is_trusted_to(caplog):
+    sphere = render_lambertian("sphere", size=64, n_lights=16)
+    turn = Rotation.from_euler("z", 90, degrees=True).as_matrix()
+    estimate = Lights((sphere.light_directions @ turn.T).astype(np.float32), sphere.light_intensities,
+                      "estimated")
+    np.testing.assert_array_equal(align_to_contour(sphere, estimate).directions, estimate.directions)
+    assert "trusted to correct" in caplog.text

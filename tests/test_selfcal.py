@@ -127,7 +127,7 @@ def test_light_selfcal_in_a_fit_logs_each_stage_and_draws_the_lights(tmp_path, c
     assert metrics["light"] == "selfcal" and np.isfinite(metrics["light_dir_mae"])
     stages = [line for line in caplog.text.splitlines() if "lights of 32 images after" in line]
     assert [s.split(" after ")[1].split(" (")[0].split(",")[0] for s in stages] == \
-        ["network", "contour alignment", "self-calibration"]
+        ["network", "reversal test", "contour alignment", "self-calibration"]
     assert all("direction error" in s for s in stages)
     assert (tmp_path / "lights.png").read_bytes()[:4] == b"\x89PNG"
     written = np.loadtxt(tmp_path / "lights.txt")

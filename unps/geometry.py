@@ -1,4 +1,5 @@
-"""Surfaces from normals: depth by least squares on the gradient field (supplementary Eq. 1), meshes.
+"""Surfaces from normals: depth by least squares on the gradient field (supplementary Eq. 1), meshes,
+and the shadows a depth map casts.
 
 Frame: x right (+col), y up (−row), z toward the camera; orthographic projection with one
 unit per pixel of the grid.
@@ -10,6 +11,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import spsolve
+import torch
 
 from unps.grid import Frame
 
@@ -100,3 +102,39 @@ def depth_to_mesh(depth: np.ndarray, mask: np.ndarray, frame: Frame | None = Non
         keep = three >= 0
         faces.append(three[keep].reshape(-1, 3))   # the three present corners, still in cyclic order
     return vertices, np.concatenate(faces).astype(np.int32)
+
+
+def cast_shadows(depth: torch.Tensor, mask: torch.Tensor, lights: torch.Tensor, pitch: float,
+                 steps: int) -> torch.Tensor:
+    """Which object pixels each light cannot see, marching the depth map toward the light.
+
+    From each object pixel, ``steps`` samples spaced evenly over the image's diagonal are taken
+    along the light's image-plane direction (nearest pixel); the ray rises by l_z / |l_xy| per
+    unit of distance, and the pixel is in shadow if the object stands above it at any sample.
+
+    Args:
+        depth: (H, W) float32 depth along +z, in units of which one pixel is ``pitch``.
+        mask: (H, W) bool object mask.
+        lights: (n, 3) unit directions, surface to light.
+        pitch: one pixel's size in depth units (1 when depth is in pixels).
+        steps: samples along each ray.
+
+    Returns:
+        (n, H, W) bool.
+    """
+    h, w = depth.shape
+    rows, cols = torch.nonzero(mask, as_tuple=True)
+    planar = lights[:, :2].norm(dim=-1).clamp_min(1e-6)
+    step = torch.stack([-lights[:, 1], lights[:, 0]], -1) / planar[:, None]   # (row, col) per pixel
+    distance = torch.linspace(1, (h ** 2 + w ** 2) ** 0.5, steps)            # in pixels
+    r = (rows[None, None] + distance[None, :, None] * step[:, 0, None, None]).round().int()
+    c = (cols[None, None] + distance[None, :, None] * step[:, 1, None, None]).round().int()
+    inside = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+    flat = (r.clamp(0, h - 1) * w + c.clamp(0, w - 1))
+    surface = torch.where(mask, depth, torch.full_like(depth, -torch.inf)).flatten()
+    ray = depth[rows, cols][None, None] + (distance * pitch)[None, :, None] * \
+        (lights[:, 2] / planar)[:, None, None]
+    blocked = (inside & (surface[flat] > ray + 1e-3)).any(1)                  # (n, P)
+    out = torch.zeros(len(lights), h, w, dtype=torch.bool)
+    out[:, rows, cols] = blocked
+    return out

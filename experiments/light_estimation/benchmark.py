@@ -6,15 +6,17 @@
 1. DiLiGenT (ball 16-bit, cat and pot1 crops, all 96 images): direction MAE of the lights as
    the network gives them in one pass (the default) and averaged over the eight symmetries of
    the square (``light.symmetric=true``), the median spread of those eight estimates, the
-   scale-invariant intensity error (one pass), the direction MAE once aligned to
-   the occluding contour (``light.align=contour``, the default of ``light=estimated``), and the
+   scale-invariant intensity error (one pass), the direction MAE after the cast-shadow reversal
+   test (``light.reversal=shadows``) and then also aligned to the occluding contour
+   (``light.align=contour``; both the defaults of ``light=estimated``), and the
    normal MAE of the robust initialisation with the network's, the aligned and the
    ground-truth lights.
    With ``--renders Face Tablet1 …``, the same directions for unps's own rendered subjects.
 2. Held-out synthetic stacks (seeds never used in training) of the checkpoint's own recipe, per
    BRDF family: analytic always, MERL neural fits when ``<data>/merl_nbrdf`` exists, MERL tables
    with ``--merl-dir``; and per shape family (blob, vessel, relief, sculpture), seen through
-   the simulated camera under every light layout.
+   the simulated camera under every light layout; each row also after the cast-shadow reversal
+   test.
 3. Speed of the checkpoint's recipe on this machine: generating one batch (one core, as the
    training's data worker) against one training step.
 """
@@ -30,9 +32,9 @@ import torch
 from omegaconf import OmegaConf
 
 from unps.data.diligent import read_diligent_object
+from unps.data.subject import Subject
 from unps.errors import InputError
-from unps.lights import light_errors
-from unps.lights import with_lights
+from unps.lights import Lights, light_errors, with_lights
 from unps.lightnet.bins import decode_lights, encode_lights
 from unps.lightnet.estimate import estimate_lights
 from unps.lightnet.materials import MaterialBank
@@ -40,8 +42,9 @@ from unps.lightnet.rig import LAYOUTS, Camera
 from unps.lightnet.shapes import SHAPES
 from unps.lightnet.synthesis import LightDataset
 from unps.lightnet.system import SHIPPED, batch_light_errors, build_net, load_lightnet
-from unps.metrics import normal_metrics
+from unps.metrics import light_direction_mae, normal_metrics
 from unps.lights.contour import align_to_contour
+from unps.lights.reversal import resolve_reversal
 from unps.solvers.rpca import robust_init
 
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
@@ -50,17 +53,18 @@ OBJECTS = ("ball", "cat", "pot1")
 
 def diligent(data: Path, checkpoint, quantization: str = "auto"):
     """``quantization``: ``auto`` reads the 8-bit crops as ``floor``, the way they were made."""
-    print("DiLiGenT, all 96 images   1-pass dir MAE   8-sym dir MAE   spread   int err   aligned dir MAE   "
-          "RPCA(est) °  RPCA(aligned) °  RPCA(GT) °")
+    print("DiLiGenT, all 96 images   1-pass dir MAE   8-sym dir MAE   spread   int err   reversal-tested   "
+          "aligned dir MAE   RPCA(est) °  RPCA(aligned) °  RPCA(GT) °")
     for name in OBJECTS:
         try:
             subject = read_diligent_object(data / "DiLiGenT", name, quantization=quantization)
         except InputError as e:
             print(f"{name:<6} skipped: {e}")
             continue
-        lights = estimate_lights(subject, checkpoint, align=None)
-        averaged = estimate_lights(subject, checkpoint, symmetric=True, align=None)
-        aligned = align_to_contour(subject, lights)
+        lights = estimate_lights(subject, checkpoint, reversal=None, align=None)
+        averaged = estimate_lights(subject, checkpoint, symmetric=True, reversal=None, align=None)
+        tested, normals = resolve_reversal(subject, lights)
+        aligned = align_to_contour(subject, tested, normals)
         errors = light_errors(lights, subject)
         est = robust_init(with_lights(subject, lights), lights.directions)
         est_aligned = robust_init(with_lights(subject, aligned), aligned.directions)
@@ -70,6 +74,7 @@ def diligent(data: Path, checkpoint, quantization: str = "auto"):
               f"{light_errors(averaged, subject)['light_dir_mae']:>10.2f}° "
               f"{np.median(averaged.spread_deg):>7.1f}° "
               f"{errors['light_int_err']:>9.3f} "
+              f"{light_errors(tested, subject)['light_dir_mae']:>16.2f}° "
               f"{light_errors(aligned, subject)['light_dir_mae']:>16.2f}° {mae(est):>12.2f} "
               f"{mae(est_aligned):>16.2f} {mae(gt):>11.2f}", flush=True)
 
@@ -79,16 +84,19 @@ def renders(names: list[str], checkpoint):
     from hydra import compose, initialize_config_module
     from hydra.utils import instantiate
 
-    print("rendered subject          1-pass dir MAE   8-sym dir MAE   spread   aligned dir MAE")
+    print("rendered subject          1-pass dir MAE   8-sym dir MAE   spread   reversal-tested   "
+          "aligned dir MAE")
     with initialize_config_module("unps.conf", version_base=None):
         for name in names:
             subject = instantiate(compose("fit", overrides=[f"subject={name}"]).subject, _partial_=True)()
-            lights = estimate_lights(subject, checkpoint, align=None)
-            averaged = estimate_lights(subject, checkpoint, symmetric=True, align=None)
-            aligned = align_to_contour(subject, lights)
+            lights = estimate_lights(subject, checkpoint, reversal=None, align=None)
+            averaged = estimate_lights(subject, checkpoint, symmetric=True, reversal=None, align=None)
+            tested, normals = resolve_reversal(subject, lights)
+            aligned = align_to_contour(subject, tested, normals)
             print(f"{name:<25} {light_errors(lights, subject)['light_dir_mae']:>15.2f}° "
                   f"{light_errors(averaged, subject)['light_dir_mae']:>10.2f}° "
                   f"{np.median(averaged.spread_deg):>7.1f}° "
+                  f"{light_errors(tested, subject)['light_dir_mae']:>16.2f}° "
                   f"{light_errors(aligned, subject)['light_dir_mae']:>16.2f}°", flush=True)
 
 
@@ -99,7 +107,7 @@ def synthetic(net, config, families: dict, samples: int):
     recipe = config["recipe"]
     common = dict(resolution=recipe["resolution"], images=recipe["images"], seed=987_654)
     print(f"held-out synthetic ({recipe['resolution']} px, {recipe['images']} images, {samples} "
-          f"stacks per family)   dir MAE   int err")
+          f"stacks per family)   dir MAE   int err   reversal-tested")
     for family, bank in families.items():
         score(net, LightDataset(samples, materials=bank, family=family, **common), f"BRDF {family}")
     for shape in SHAPES:
@@ -108,14 +116,22 @@ def synthetic(net, config, families: dict, samples: int):
 
 
 def score(net, ds: LightDataset, label: str) -> None:
-    maes, errs = [], []
+    """Direction MAE and intensity error of the network, and the direction MAE after the
+    cast-shadow reversal test (:func:`unps.lights.reversal.resolve_reversal`)."""
+    maes, errs, tested = [], [], []
     for i in range(0, len(ds), 8):
         batch = torch.utils.data.default_collate([ds[j] for j in range(i, min(i + 8, len(ds)))])
         logits = net(batch["images"], batch["mask"])
         d, e = decode_lights(logits["azimuth"], logits["elevation"], logits["intensity"], True)
         mae, err = batch_light_errors(d, e, batch["directions"], batch["intensities"])
         maes.append(mae), errs.append(err)
-    print(f"{label:<60} {torch.cat(maes).mean():>7.2f}° {torch.cat(errs).mean():>9.3f}", flush=True)
+        for images, mask, directions, intensities, truth in zip(
+                batch["images"], batch["mask"], d, e, batch["directions"]):
+            subject = Subject("held-out", images.permute(0, 2, 3, 1).numpy(), mask[0].numpy() > 0.5)
+            lights = Lights(directions.numpy(), intensities[:, None].repeat(1, 3).numpy(), "estimated")
+            tested.append(light_direction_mae(resolve_reversal(subject, lights)[0].directions, truth.numpy()))
+    print(f"{label:<60} {torch.cat(maes).mean():>7.2f}° {torch.cat(errs).mean():>9.3f} "
+          f"{np.mean(tested):>16.2f}°", flush=True)
 
 
 def speed(config, steps: int = 10):

@@ -4,8 +4,9 @@
     python experiments/self_calibration/benchmark.py --subjects ball cat pot1 --no-perturbation
 
 1. Per subject (DiLiGenT ball, cat, pot1 read as made, all 96 images; unps's rendered subjects,
-   rendered and cached on first use): light direction MAE of the network, after contour alignment
-   and after self-calibration, the self-calibrated intensity error, the normal MAE of the robust
+   rendered and cached on first use): light direction MAE of the network, after the cast-shadow
+   reversal test, after contour alignment and after self-calibration (the stages of
+   ``light=selfcal``), the self-calibrated intensity error, the normal MAE of the robust
    initialisation with each of those lights and with the true ones, and the self-calibration's
    runtime on this machine.
 2. The perturbation protocol of SCPS-NIR (Li & Li 2022, Table 2) on DiLiGenT: start from the true
@@ -29,6 +30,7 @@ from unps.errors import InputError
 from unps.lightnet.estimate import network_estimate
 from unps.lights import Lights, light_errors, with_lights
 from unps.lights.contour import align_to_contour
+from unps.lights.reversal import resolve_reversal
 from unps.lights.selfcal import SelfCalibration, self_calibrate
 from unps.metrics import normal_metrics
 from unps.solvers.rpca import robust_init
@@ -70,19 +72,22 @@ def rpca_error(subject, lights: Lights) -> float:
 
 
 def compare(names, data: Path, settings: SelfCalibration) -> None:
-    print(f"{'subject':<10} {'network':>8} {'contour':>8} {'selfcal':>8} {'int err':>8} │ "
+    print(f"{'subject':<10} {'network':>8} {'reversal':>8} {'contour':>8} {'selfcal':>8} {'int err':>8} │ "
           f"{'RPCA with: network':>19} {'contour':>8} {'selfcal':>8} {'GT':>6} │ {'time':>6}")
     for name, subject in available(names, data):
         truth = Lights(subject.light_directions, subject.light_intensities, "gt")
         network = network_estimate(subject, None, soft_decode=True)
-        contour = align_to_contour(subject, network)
+        tested, normals = resolve_reversal(subject, network)
+        contour = align_to_contour(subject, tested, normals)
         start = time.perf_counter()
         selfcal = self_calibrate(subject, contour, settings)
         runtime = time.perf_counter() - start
         stages = (network, contour, selfcal)
-        directions = [light_errors(lights, subject)["light_dir_mae"] for lights in stages]
+        directions = [light_errors(lights, subject)["light_dir_mae"] for lights in (network, tested,
+                                                                                     contour, selfcal)]
         rpca = [rpca_error(subject, lights) for lights in (*stages, truth)]
         print(f"{name:<10} {directions[0]:>7.2f}° {directions[1]:>7.2f}° {directions[2]:>7.2f}° "
+              f"{directions[3]:>7.2f}° "
               f"{light_errors(selfcal, subject)['light_int_err']:>8.3f} │ {rpca[0]:>18.2f}° "
               f"{rpca[1]:>7.2f}° {rpca[2]:>7.2f}° {rpca[3]:>5.2f}° │ {runtime:>5.0f}s", flush=True)
 

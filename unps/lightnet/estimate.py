@@ -10,11 +10,13 @@ import torch
 import torch.nn.functional as F
 
 from unps.data.subject import Subject
+from unps.errors import InputError
 from unps.lightnet.bins import decode_lights
 from unps.lightnet.symmetry import SYMMETRIES, frame_matrix, mean_direction, transform_images
 from unps.lightnet.system import load_lightnet
 from unps.lights import Lights, light_errors
 from unps.lights.contour import align_to_contour
+from unps.lights.reversal import resolve_reversal
 from unps.lights.selfcal import SelfCalibration, self_calibrate
 from unps.timing import stage
 
@@ -55,8 +57,8 @@ def network_input(images: np.ndarray, mask: np.ndarray, resolution: int
 
 
 def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode: bool = True,
-                    symmetric: bool = False, align: str | None = "contour",
-                    selfcal: SelfCalibration | None = None) -> Lights:
+                    symmetric: bool = False, reversal: str | None = "shadows",
+                    align: str | None = "contour", selfcal: SelfCalibration | None = None) -> Lights:
     """Directions and relative intensities of every image, from the captured images alone.
 
     Args:
@@ -66,6 +68,9 @@ def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode
         symmetric: average the network's estimates under the eight symmetries of the square
             (:mod:`unps.lightnet.symmetry`; beyond the paper) and warn when they disagree by more
             than :data:`SPREAD_WARNING` (median over the lights); False runs the network once.
+        reversal: ``"shadows"`` turns the network's directions half a turn about the view axis
+            when the shadows they cast over the reversed surface match the images better
+            (:func:`unps.lights.reversal.resolve_reversal`; beyond the paper), None keeps them.
         align: ``"contour"`` rotates the network's directions so that the occluding contour's
             normals face sideways (:func:`unps.lights.contour.align_to_contour`; beyond the
             paper), None keeps them as the network gave them.
@@ -73,23 +78,30 @@ def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode
             (:func:`unps.lights.selfcal.self_calibrate`; beyond the paper), None skips it.
 
     Raises:
-        ValueError: another ``align``.
+        InputError: another ``reversal`` or ``align``.
 
     Returns:
         Lights with (n, 3) unit directions and (n, 3) intensities (one value per image,
         repeated for RGB; mean 1 over the images), and the network's ``spread_deg``.
     """
+    if reversal not in (None, "shadows"):
+        raise InputError(f"light.reversal must be shadows or null, got {reversal!r}")
     if align not in (None, "contour"):
-        raise ValueError(f"light.align must be contour or null, got {align!r}")
+        raise InputError(f"light.align must be contour or null, got {align!r}")
     with stage("light network"):
         lights = network_estimate(subject, checkpoint, soft_decode, symmetric)
     log_stage(f"network ({checkpoint or 'shipped weights'})", lights, subject)
     spread = lights.spread_deg
     if spread is not None:
         warn_if_uncertain(spread)
+    normals = None          # the robust initialisation's with the lights, shared by the next two
+    if reversal == "shadows":
+        with stage("reversal test"):
+            lights, normals = resolve_reversal(subject, lights)
+        log_stage("reversal test", lights, subject)
     if align == "contour":
         with stage("contour alignment"):
-            lights = align_to_contour(subject, lights)
+            lights = align_to_contour(subject, lights, normals)
         log_stage("contour alignment", lights, subject)
     if selfcal is not None:
         with stage("self-calibration"):

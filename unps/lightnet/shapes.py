@@ -17,6 +17,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from unps import geometry
 from unps.errors import InputError
 
 
@@ -188,32 +189,6 @@ def mesh_views(folder: str | os.PathLike, resolution: int, views: int, seed: int
 
 
 def cast_shadows(maps: ShapeMaps, lights: torch.Tensor, steps: int = 24) -> torch.Tensor:
-    """Which object pixels each light cannot see, marching the depth map toward the light.
-
-    From each object pixel, ``steps`` samples spaced evenly over the image's diagonal are taken
-    along the light's image-plane direction (nearest pixel); the ray rises by l_z / |l_xy| per
-    unit of distance, and the pixel is in shadow if the object stands above it at any sample.
-
-    Args:
-        lights: (n, 3) unit directions.
-
-    Returns:
-        (n, H, W) bool.
-    """
-    h, w = maps.depth.shape
-    pitch = 2 / (h - 1)
-    rows, cols = torch.nonzero(maps.mask, as_tuple=True)
-    planar = lights[:, :2].norm(dim=-1).clamp_min(1e-6)
-    step = torch.stack([-lights[:, 1], lights[:, 0]], -1) / planar[:, None]   # (row, col) per pixel
-    distance = torch.linspace(1, (h ** 2 + w ** 2) ** 0.5, steps)            # in pixels
-    r = (rows[None, None] + distance[None, :, None] * step[:, 0, None, None]).round().int()
-    c = (cols[None, None] + distance[None, :, None] * step[:, 1, None, None]).round().int()
-    inside = (r >= 0) & (r < h) & (c >= 0) & (c < w)
-    flat = (r.clamp(0, h - 1) * w + c.clamp(0, w - 1))
-    surface = torch.where(maps.mask, maps.depth, torch.full_like(maps.depth, -torch.inf)).flatten()
-    ray = maps.depth[rows, cols][None, None] + (distance * pitch)[None, :, None] * \
-        (lights[:, 2] / planar)[:, None, None]
-    blocked = (inside & (surface[flat] > ray + 1e-3)).any(1)                  # (n, P)
-    out = torch.zeros(len(lights), h, w, dtype=torch.bool)
-    out[:, rows, cols] = blocked
-    return out
+    """(n, H, W) bool: which object pixels each of the (n, 3) unit ``lights`` cannot see
+    (:func:`unps.geometry.cast_shadows` on the maps' depth in view units)."""
+    return geometry.cast_shadows(maps.depth, maps.mask, lights, 2 / (maps.depth.shape[0] - 1), steps)

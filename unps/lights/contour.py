@@ -28,6 +28,7 @@ log = logging.getLogger(__name__)
 MIN_CONTOUR_PIXELS = 50
 MAX_CONTOUR_MISFIT = 45.0   # degrees: median angle left on the contour after the best rotation
 MIN_ROTATION = 5.0          # degrees: smaller rotations are within the estimate's own error
+MAX_ROTATION = 45.0         # degrees: larger ones are the outline's error, not the estimate's
 
 
 def outward_normals(mask: np.ndarray, band: int = 2, smoothing: float = 2.0
@@ -88,13 +89,15 @@ def rotation_angle(rotation: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip((np.trace(rotation) - 1) / 2, -1, 1))))
 
 
-def align_to_contour(subject: Subject, lights: Lights) -> Lights:
+def align_to_contour(subject: Subject, lights: Lights, normals: np.ndarray | None = None) -> Lights:
     """Estimated lights rotated so that the robust initialisation's normals with them face
     outward on the occluding contour.
 
     Args:
         subject: its captured images and mask.
         lights: estimated directions and intensities.
+        normals: (H, W, 3) the robust initialisation's normals with ``lights``; computed when
+            None.
 
     Returns:
         The lights with every direction rotated by :func:`contour_rotation` (intensities
@@ -102,12 +105,22 @@ def align_to_contour(subject: Subject, lights: Lights) -> Lights:
         ``MIN_ROTATION``: on DiLiGenT's ground-truth normals the contour itself asks for up to
         4.8° (cat), since its band is not everywhere an occluding contour, so smaller rotations
         are as likely to be its error as the network's. Measured on the Face, the rotation of
-        2.9° it asks for costs the fit 0.3–0.6°.
+        2.9° it asks for costs the fit 0.3–0.6°. Nor is one over ``MAX_ROTATION`` applied: the
+        largest the network's bias has needed is 17.6° (cat), while the broken rim of BrokenPot,
+        no occluding contour, asks to turn lights that cast shadows have put right by 179°
+        (:mod:`unps.lights.reversal`).
     """
-    normals = robust_init(with_lights(subject, lights), lights.directions).normals
+    if normals is None:
+        normals = robust_init(with_lights(subject, lights), lights.directions).normals
     rotation, basis = contour_rotation(normals, subject.mask)
     if rotation is None:
         log.warning("subject %r: %s; the estimated lights are used as they are", subject.name, basis)
+        return lights
+    if rotation_angle(rotation) > MAX_ROTATION:
+        log.warning("subject %r: the occluding contour asks for a rotation of %.1f° of the estimated "
+                    "lights, more than the %.0f° it is trusted to correct; the "
+                    "outline is unlikely to be an occluding contour (%s), and the lights are used "
+                    "as they are", subject.name, rotation_angle(rotation), MAX_ROTATION, basis)
         return lights
     if rotation_angle(rotation) < MIN_ROTATION:
         log.info("the occluding contour asks for a rotation of %.2f° of the estimated lights, under "
