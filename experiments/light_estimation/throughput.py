@@ -85,9 +85,9 @@ def data_rate(dataset: LightDataset, count: int) -> float:
 
 
 REPO = Path(__file__).resolve().parents[2]
-SETTINGS = {"recipe (1 data worker, 2 threads)": [],
-            "no data worker, 2 threads": ["recipe.workers=0"],
-            "1 data worker, 1 thread": ["recipe.threads=1"]}
+SETTINGS = {"recipe (no data worker, 2 threads)": [],
+            "1 data worker, 2 threads": ["recipe.workers=1"],
+            "1 data worker, 1 thread": ["recipe.workers=1", "recipe.threads=1"]}
 
 
 def run_rate(source: Path, steps: int, overrides: list[str]) -> float:
