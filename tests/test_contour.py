@@ -5,6 +5,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from unps.data.analytic import render_lambertian
+from unps.errors import InputError
 from unps.lights import Lights
 from unps.metrics import angular_error
 from unps.lights.contour import align_to_contour, contour_rotation, outward_normals, rotation_angle
@@ -63,7 +64,7 @@ def test_align_to_contour_corrects_globally_rotated_lights():
 
 def test_estimate_lights_refuses_an_unknown_alignment():
     from unps.lightnet.estimate import estimate_lights
-    with pytest.raises(ValueError, match="light.align"):
+    with pytest.raises(InputError, match="light.align"):
         estimate_lights(render_lambertian(size=16, n_lights=4), align="boundary")
 
 

@@ -124,6 +124,12 @@ CASES = [
     Case("missing light checkpoint", "`light=estimated light.checkpoint=/nowhere.ckpt`",
          lambda root: folder_args(sphere_folder(root), "light=estimated", "light.checkpoint=/nowhere.ckpt",
                                   *WOODHAM), 2, "/nowhere.ckpt"),
+    Case("unknown reversal test", "`light=estimated light.reversal=mirror`",
+         lambda root: ["subject=lambertian", "light=estimated", "light.reversal=mirror", *WOODHAM], 2,
+         "light.reversal"),
+    Case("unknown light alignment", "`light=estimated light.align=boundary`",
+         lambda root: ["subject=lambertian", "light=estimated", "light.align=boundary", *WOODHAM], 2,
+         "light.align"),
     # -- files --------------------------------------------------------------------------------
     Case("root not a folder", "`subject.root` that does not exist",
          lambda root: folder_args(root / "nowhere", *WOODHAM), 2, "nowhere: not a folder"),
