@@ -105,7 +105,7 @@ def depth_to_mesh(depth: np.ndarray, mask: np.ndarray, frame: Frame | None = Non
 
 
 def cast_shadows(depth: torch.Tensor, mask: torch.Tensor, lights: torch.Tensor, pitch: float,
-                 steps: int) -> torch.Tensor:
+                 steps: int, chunk: int = 16) -> torch.Tensor:
     """Which object pixels each light cannot see, marching the depth map toward the light.
 
     From each object pixel, ``steps`` samples spaced evenly over the image's diagonal are taken
@@ -118,23 +118,25 @@ def cast_shadows(depth: torch.Tensor, mask: torch.Tensor, lights: torch.Tensor, 
         lights: (n, 3) unit directions, surface to light.
         pitch: one pixel's size in depth units (1 when depth is in pixels).
         steps: samples along each ray.
+        chunk: lights marched at once (memory grows as chunk × steps × object pixels).
 
     Returns:
         (n, H, W) bool.
     """
     h, w = depth.shape
     rows, cols = torch.nonzero(mask, as_tuple=True)
-    planar = lights[:, :2].norm(dim=-1).clamp_min(1e-6)
-    step = torch.stack([-lights[:, 1], lights[:, 0]], -1) / planar[:, None]   # (row, col) per pixel
     distance = torch.linspace(1, (h ** 2 + w ** 2) ** 0.5, steps)            # in pixels
-    r = (rows[None, None] + distance[None, :, None] * step[:, 0, None, None]).round().int()
-    c = (cols[None, None] + distance[None, :, None] * step[:, 1, None, None]).round().int()
-    inside = (r >= 0) & (r < h) & (c >= 0) & (c < w)
-    flat = (r.clamp(0, h - 1) * w + c.clamp(0, w - 1))
     surface = torch.where(mask, depth, torch.full_like(depth, -torch.inf)).flatten()
-    ray = depth[rows, cols][None, None] + (distance * pitch)[None, :, None] * \
-        (lights[:, 2] / planar)[:, None, None]
-    blocked = (inside & (surface[flat] > ray + 1e-3)).any(1)                  # (n, P)
     out = torch.zeros(len(lights), h, w, dtype=torch.bool)
-    out[:, rows, cols] = blocked
+    for first in range(0, len(lights), chunk):
+        part = lights[first:first + chunk]
+        planar = part[:, :2].norm(dim=-1).clamp_min(1e-6)
+        step = torch.stack([-part[:, 1], part[:, 0]], -1) / planar[:, None]   # (row, col) per pixel
+        r = (rows[None, None] + distance[None, :, None] * step[:, 0, None, None]).round().int()
+        c = (cols[None, None] + distance[None, :, None] * step[:, 1, None, None]).round().int()
+        inside = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+        flat = (r.clamp(0, h - 1) * w + c.clamp(0, w - 1))
+        ray = depth[rows, cols][None, None] + (distance * pitch)[None, :, None] * \
+            (part[:, 2] / planar)[:, None, None]
+        out[first:first + chunk, rows, cols] = (inside & (surface[flat] > ray + 1e-3)).any(1)
     return out
