@@ -8,6 +8,7 @@ from hydra import compose, initialize_config_module
 from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
 from hydra.core.override_parser.overrides_parser import OverridesParser
 
+from conftest import load_script
 from unps.data.analytic import render_lambertian
 from unps.data.diligent import find_diligent_object, read_diligent, read_diligent_object
 from unps.data.writer import write_diligent
@@ -262,24 +263,6 @@ def test_notebook_runs_at_tiny_size(tmp_path):
     images = [o for c in notebook.cells if c.cell_type == "code" for o in c.outputs
               if "image/png" in o.get("data", {})]
     assert len(images) >= 5
-
-
-def load_script(name, relative):
-    """Import a script by path; it is registered under ``name`` while it runs (dataclasses need it)."""
-    import importlib.util
-    import sys
-    spec = importlib.util.spec_from_file_location(name, Path(__file__).parents[1] / relative)
-    module = importlib.util.module_from_spec(spec)
-    previous = sys.modules.get(name)
-    sys.modules[name] = module
-    try:
-        spec.loader.exec_module(module)
-    finally:
-        if previous is None:
-            del sys.modules[name]
-        else:
-            sys.modules[name] = previous
-    return module
 
 
 @pytest.mark.parametrize("script", sorted(str(p.relative_to(Path(__file__).parents[1]))

@@ -6,11 +6,11 @@ import pytest
 import torch
 from hydra import compose, initialize_config_module
 
-from conftest import SHARED_DATA
+from conftest import SHARED_DATA, load_script
 from unps.errors import InputError
 from unps.lightnet import bins
-from unps.lightnet.brdf import (AnalyticBRDF, MERL_SHAPE, half_diff_angles, read_merl_binary,
-                                read_neural_brdf)
+from unps.lightnet.brdf import (AnalyticBRDF, MERL_SHAPE, ggx_lobe, half_diff_angles,
+                                read_merl_binary, read_neural_brdf)
 from unps.lightnet.estimate import estimate_lights, network_input
 from unps.lightnet.network import LightNet
 from unps.lightnet.shapes import cast_shadows, maps_from_depth
@@ -70,6 +70,49 @@ def test_analytic_brdf_is_lambertian_without_a_lobe():
     f = AnalyticBRDF([0.5, 0.25, 0.1], [0, 0, 0], 0.3)
     value = f(unit([0.3, 0.1, 0.9]), unit([0, 0, 1.0]))
     np.testing.assert_allclose(value, np.array([0.5, 0.25, 0.1]) / math.pi, rtol=1e-6)
+
+
+def test_two_lobes_add_and_a_metal_has_no_fresnel_rise():
+    wi, wo = unit([[0.3, 0.1, 0.9], [0.95, 0.0, 0.1]]), unit([[0, 0, 1.0], [-0.2, 0, 0.98]])
+    both = AnalyticBRDF([0.2] * 3, [[1.0] * 3, [0.5, 0.4, 0.3]], (0.05, 0.4), (0.04, 0.9))
+    sharp = AnalyticBRDF([0.2] * 3, [1.0] * 3, 0.05, 0.04)
+    broad = AnalyticBRDF([0.0] * 3, [0.5, 0.4, 0.3], 0.4, 0.9)
+    torch.testing.assert_close(both(wi, wo), sharp(wi, wo) + broad(wi, wo))
+    def metal_over_coat(wi, wo):
+        return float(ggx_lobe(wi, wo, 0.3, 1.0) / ggx_lobe(wi, wo, 0.3, 0.04))
+
+    head_on = unit([[0, 0, 1.0]])
+    assert metal_over_coat(head_on, head_on) == pytest.approx(1 / 0.04, rel=1e-4)
+    assert metal_over_coat(unit([[0.99, 0, 0.05]]), unit([[-0.99, 0, 0.05]])) < 2   # the coat's rise
+    with pytest.raises(ValueError, match="roughness: 3 values for 2 lobes"):
+        AnalyticBRDF([0.2] * 3, [[1.0] * 3] * 2, (0.1, 0.2, 0.3))
+
+
+def test_measured_span_materials_lie_in_the_fitted_ranges():
+    from unps.lightnet.brdf import MEASURED_RANGES, random_measured
+
+    g = torch.Generator().manual_seed(0)
+    for _ in range(200):
+        brdf = random_measured(g)
+        (a1, a2), f0 = brdf.roughness, torch.tensor(brdf.fresnel0)
+        assert MEASURED_RANGES["alpha1"][0] <= a1 <= a2 <= MEASURED_RANGES["alpha2"][1]
+        assert ((f0 >= MEASURED_RANGES["fresnel0"][0]) & (f0 <= MEASURED_RANGES["fresnel0"][1])).all()
+        low, high = MEASURED_RANGES["log10_specular_over_diffuse"]
+        ratio = math.log10(float(brdf.specular.sum(0).mean() / brdf.diffuse.mean()))
+        assert low + math.log10(0.5) - 1e-3 <= ratio <= high + 1e-3     # lobe tints 0.5…1
+        value = brdf(unit([[0.2, 0.1, 0.97]]), unit([[0, 0, 1.0]]))
+        assert torch.isfinite(value).all() and (value > 0).all()
+
+
+def test_lobe_fitting_recovers_a_known_two_lobe_material():
+    lobes = load_script("merl_lobes", "experiments/light_estimation/merl_lobes.py")
+    wi, wo = lobes.direction_pairs(4096)
+    truth = AnalyticBRDF([0.3, 0.2, 0.1], [[0.4] * 3, [1.5, 1.2, 1.0]], (0.04, 0.3), (0.05, 0.2))
+    with torch.no_grad():
+        target = truth(wi, wo)
+    fit = lobes.fit_lobes(target, wi, wo, iterations=400)
+    assert fit["rms_log"] < 0.05
+    np.testing.assert_allclose(fit["alpha"], [0.04, 0.3], rtol=0.25)
 
 
 def write_merl(path, table):
@@ -181,6 +224,15 @@ def test_training_logs_a_progress_line(tmp_path, caplog):
     assert any(line.startswith("step 4/4: loss ") and "validation direction error" in line for line in lines)
 
 
+def test_a_run_stopped_by_its_time_limit_says_how_to_go_on(tmp_path, caplog):
+    caplog.set_level(logging.INFO)
+    metrics = train(train_config(tmp_path, "recipe.max_steps=100000", "recipe.max_time=00:00:00:02"))
+    assert 0 < metrics["steps"] < 100000
+    stop = [r.getMessage() for r in caplog.records if r.getMessage().startswith("stopped at step")]
+    assert len(stop) == 1 and "recipe.max_time=00:00:00:02" in stop[0]
+    assert f"ckpt_path={tmp_path / 'checkpoints' / 'last.ckpt'} recipe.max_time=<longer>" in stop[0]
+
+
 def test_checkpoint_restores_the_same_network(trained):
     out, _ = trained
     saved = torch.load(out / "checkpoints" / "last.ckpt", weights_only=False)
@@ -214,10 +266,20 @@ def test_an_interrupted_run_resumes_with_its_own_config(tmp_path, monkeypatch):
     last = tmp_path / "first" / "checkpoints" / "last.ckpt"
     assert torch.load(last, weights_only=False)["global_step"] == 2
 
-    metrics = train(train_config(tmp_path / "again", "light.width=16", f"ckpt_path={last}"))
+    resume = ("light.width=8", f"ckpt_path={last}")     # the run's own width: not a change
+    metrics = train(train_config(tmp_path / "again", *resume), resume)
     assert metrics["steps"] == 4
     _, config = load_lightnet(tmp_path / "again" / "checkpoints" / "last.ckpt")
-    assert config["light"]["width"] == 8                  # the saved config, not the override
+    assert config["recipe"]["max_steps"] == 4 and config["light"]["width"] == 8
+
+    longer = (f"ckpt_path={tmp_path / 'again' / 'checkpoints' / 'last.ckpt'}", "recipe.max_steps=6")
+    assert train(train_config(tmp_path / "longer", *longer), longer)["steps"] == 6
+
+    other = (f"ckpt_path={last}", "light.width=16", "recipe.lr=0.1")
+    with pytest.raises(InputError, match=r"only recipe.max_steps and recipe.max_time may change, but "
+                                         r"the command line changes light.width \(8 in the run, 16 "
+                                         r"asked\), recipe.lr"):
+        train(train_config(tmp_path / "other", *other), other)
 
 
 def test_estimated_lights_in_a_fit(trained, tmp_path):

@@ -3,6 +3,7 @@
     python -m unps.train                           # the 2-core CPU recipe (recipe=cpu)
     python -m unps.train recipe=paper              # the paper's sizes (a GPU)
     python -m unps.train ckpt_path=<run>/checkpoints/last.ckpt   # resume, with that run's config
+    python -m unps.train ckpt_path=<run>/checkpoints/last.ckpt recipe.max_steps=20000  # and extend it
 
 Data are rendered on the fly (:class:`unps.lightnet.data.LightData`); checkpoints, TensorBoard logs
 and ``metrics.json`` land in the run folder.
@@ -13,6 +14,7 @@ from __future__ import annotations
 import logging
 import time
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 
 import hydra
@@ -26,6 +28,50 @@ log = logging.getLogger("unps.train")
 
 PROGRESS_EVERY = 250   # steps between progress lines
 PROGRESS = (("loss", "train/loss", "{:.3f}"), ("validation direction error", "val/direction_mae", "{:.2f}°"))
+RUN_LENGTH = ("recipe.max_steps", "recipe.max_time")    # what the command line may change on resuming
+NOT_THE_RUN = ("ckpt_path", "paths.output_dir")          # where to resume from and write, not what
+
+
+def override_key(override: str) -> str:
+    """``recipe.max_steps`` of the command-line override ``recipe.max_steps=20000`` (or ``+…``)."""
+    return override.split("=", 1)[0].lstrip("+~")
+
+
+def plain(value):
+    """A config value as plain Python (dicts and lists), for comparing."""
+    return OmegaConf.to_container(value, resolve=True) if OmegaConf.is_config(value) else value
+
+
+def resumed_config(saved: dict, cfg: DictConfig, overrides: Sequence[str]) -> DictConfig:
+    """The config a run was started with, extended to the length the command line asks for.
+
+    Args:
+        saved: the config stored in the run's checkpoint.
+        cfg: the config composed from the command line.
+        overrides: the command line's overrides (``key=value``) that made ``cfg``.
+
+    Raises:
+        InputError: an override other than :data:`RUN_LENGTH` that changes the saved config;
+            a resumed run keeps its data, network and optimiser.
+    """
+    resumed = OmegaConf.create(saved)
+    changed = []
+    for key in dict.fromkeys(map(override_key, overrides)):
+        if key in NOT_THE_RUN:
+            continue
+        wanted, kept = OmegaConf.select(cfg, key), OmegaConf.select(resumed, key)
+        if key in RUN_LENGTH:
+            OmegaConf.update(resumed, key, wanted)
+            if wanted != kept:
+                log.info("resuming with %s=%s (the run had %s)", key, wanted, kept)
+        elif plain(wanted) != plain(kept):
+            changed.append(f"{key} ({kept} in the run, {wanted} asked)")
+    if changed:
+        raise InputError(f"{cfg.ckpt_path}: a resumed run keeps its config; only "
+                         f"{' and '.join(RUN_LENGTH)} may change, but the command line changes "
+                         f"{', '.join(changed)}. Start a new run with init_weights= to fine-tune "
+                         f"with other settings")
+    return resumed
 
 
 def initial_weights(path: str, cfg: DictConfig):
@@ -41,8 +87,14 @@ def initial_weights(path: str, cfg: DictConfig):
     return net.train()
 
 
-def train(cfg: DictConfig) -> dict:
-    """Train (or resume) and return the final validation metrics."""
+def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
+    """Train (or resume) and return the final validation metrics.
+
+    Args:
+        cfg: the composed ``train`` config.
+        overrides: the command-line overrides that composed it; on resuming, those of
+            :data:`RUN_LENGTH` extend the run and any other change is refused.
+    """
     import lightning as L
     from lightning.pytorch.callbacks import LearningRateMonitor, ModelCheckpoint
     from lightning.pytorch.loggers import TensorBoardLogger
@@ -63,8 +115,8 @@ def train(cfg: DictConfig) -> dict:
         saved, start_step = checkpoint.get("unps_config"), checkpoint.get("global_step", 0)
         if saved is None:
             raise InputError(f"{ckpt}: not a unps.train checkpoint (no unps_config inside)")
-        log.info("resuming from %s with the config saved in it", ckpt)
-        cfg = OmegaConf.merge(OmegaConf.create(saved),
+        log.info("resuming from %s at step %d with the config saved in it", ckpt, start_step)
+        cfg = OmegaConf.merge(resumed_config(saved, cfg, overrides),
                               {"paths": {"output_dir": str(out)}, "ckpt_path": str(ckpt)})
     L.seed_everything(cfg.seed, workers=True, verbose=False)
     torch.set_num_threads(cfg.recipe.threads or torch.get_num_threads())
@@ -96,6 +148,12 @@ def train(cfg: DictConfig) -> dict:
         for message in LIGHTNING_NOISE:
             warnings.filterwarnings("ignore", message=message)
         trainer.fit(system, datamodule=data, ckpt_path=cfg.ckpt_path or None)
+    if trainer.global_step < cfg.recipe.max_steps and not trainer.interrupted:
+        log.info("stopped at step %d of %d: the time limit recipe.max_time=%s (training time in all) "
+                 "was reached; to go on from the last validation's checkpoint: "
+                 "python -m unps.train ckpt_path=%s recipe.max_time=<longer>",
+                 trainer.global_step, cfg.recipe.max_steps, cfg.recipe.max_time,
+                 out / "checkpoints" / "last.ckpt")
     metrics = {k: float(v) for k, v in trainer.callback_metrics.items()}
     metrics.update(train_seconds=time.perf_counter() - start, steps=trainer.global_step)
     write_json(out / "metrics.json", metrics)
@@ -107,8 +165,10 @@ def train(cfg: DictConfig) -> dict:
 def main(cfg: DictConfig) -> None:
     import lightning.pytorch   # noqa: F401  (it sets its own logger to INFO when imported)
 
+    from hydra.core.hydra_config import HydraConfig
+
     logging.getLogger("lightning.pytorch").setLevel(logging.WARNING)   # no accelerator lines, no adverts
-    train(cfg)
+    train(cfg, HydraConfig.get().overrides.task)
 
 
 if __name__ == "__main__":

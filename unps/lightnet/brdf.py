@@ -38,32 +38,54 @@ def half_diff_angles(wi: torch.Tensor, wo: torch.Tensor) -> tuple[torch.Tensor, 
     return theta_h, torch.acos(dz.clamp(-1, 1)), torch.atan2(y, dx)
 
 
-class AnalyticBRDF(nn.Module):
-    """Lambertian diffuse plus a GGX / Cook–Torrance specular lobe.
+def ggx_lobe(wi: torch.Tensor, wo: torch.Tensor, alpha, fresnel0) -> torch.Tensor:
+    """One Cook–Torrance lobe D · G · F / (4 cos θᵢ cos θₒ), (...,) for (..., 3) local directions.
 
-    f = ρ_d/π + ρ_s · D(θ_h; α) · G · F(θ_d) / (4 cos θᵢ cos θₒ), Smith–GGX masking, Schlick
-    Fresnel with F₀ = 0.04 (a dielectric coat).
+    GGX distribution of roughness ``alpha``, Smith–GGX masking, Schlick Fresnel from ``fresnel0``
+    (0.04: a dielectric coat; near 1: a metal); both floats or 0-d tensors.
+    """
+    a2 = alpha ** 2
+    h = torch.nn.functional.normalize(wi + wo, dim=-1)
+    cos_h, cos_i, cos_o = h[..., 2], wi[..., 2].clamp_min(1e-4), wo[..., 2].clamp_min(1e-4)
+    d = a2 / (math.pi * (cos_h ** 2 * (a2 - 1) + 1) ** 2)
+    g1 = lambda c: 2 * c / (c + torch.sqrt(a2 + (1 - a2) * c ** 2))   # noqa: E731
+    fresnel = fresnel0 + (1 - fresnel0) * (1 - (wi * h).sum(-1).clamp(0, 1)) ** 5
+    return d * g1(cos_i) * g1(cos_o) * fresnel / (4 * cos_i * cos_o)
+
+
+class AnalyticBRDF(nn.Module):
+    """Lambertian diffuse plus GGX / Cook–Torrance specular lobes (:func:`ggx_lobe`).
+
+    f = ρ_d/π + Σₖ ρₖ · D(θ_h; αₖ) · G · F(θ_d; F0ₖ) / (4 cos θᵢ cos θₒ).
 
     Args:
-        diffuse, specular: (3,) RGB albedos.
-        roughness: GGX α.
+        diffuse: (3,) RGB albedo.
+        specular: (3,) RGB albedo of one lobe, or (k, 3) of k lobes.
+        roughness: GGX α of each lobe (a float, or k of them).
+        fresnel0: Schlick's F0 of each lobe; default 0.04, a dielectric coat.
     """
 
-    def __init__(self, diffuse, specular, roughness: float):
+    def __init__(self, diffuse, specular, roughness, fresnel0=0.04):
         super().__init__()
         self.register_buffer("diffuse", torch.as_tensor(diffuse, dtype=torch.float32))
-        self.register_buffer("specular", torch.as_tensor(specular, dtype=torch.float32))
-        self.roughness = float(roughness)
+        self.register_buffer("specular", torch.as_tensor(specular, dtype=torch.float32).reshape(-1, 3))
+        lobes = len(self.specular)
+        self.roughness = per_lobe(roughness, lobes, "roughness")
+        self.fresnel0 = per_lobe(fresnel0, lobes, "fresnel0")
 
     def forward(self, wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
-        a2 = self.roughness ** 2
-        h = torch.nn.functional.normalize(wi + wo, dim=-1)
-        cos_h, cos_i, cos_o = h[..., 2], wi[..., 2].clamp_min(1e-4), wo[..., 2].clamp_min(1e-4)
-        d = a2 / (math.pi * (cos_h ** 2 * (a2 - 1) + 1) ** 2)
-        g1 = lambda c: 2 * c / (c + torch.sqrt(a2 + (1 - a2) * c ** 2))   # noqa: E731
-        fresnel = 0.04 + 0.96 * (1 - (wi * h).sum(-1).clamp(0, 1)) ** 5
-        lobe = (d * g1(cos_i) * g1(cos_o) * fresnel / (4 * cos_i * cos_o))[..., None]
-        return self.diffuse / math.pi + self.specular * lobe
+        value = self.diffuse / math.pi
+        for albedo, alpha, fresnel0 in zip(self.specular, self.roughness, self.fresnel0):
+            value = value + albedo * ggx_lobe(wi, wo, alpha, fresnel0)[..., None]
+        return value
+
+
+def per_lobe(value, lobes: int, name: str) -> tuple:
+    """One value per lobe: a float is shared by all; floats stay floats, tensors stay tensors."""
+    values = tuple(value) if isinstance(value, (list, tuple, torch.Tensor)) else (float(value),) * lobes
+    if len(values) != lobes:
+        raise ValueError(f"{name}: {len(values)} values for {lobes} lobes")
+    return values
 
 
 def random_analytic(generator: torch.Generator) -> AnalyticBRDF:
@@ -73,6 +95,38 @@ def random_analytic(generator: torch.Generator) -> AnalyticBRDF:
     specular = (0.0 + 1.5 * u[3]) * (0.7 + 0.3 * u[4:7])
     roughness = 0.05 + 0.55 * float(u[7]) ** 1.5
     return AnalyticBRDF(diffuse, specular, roughness)
+
+
+# 5 % and 95 % points of diffuse + two-lobe fits to the 100 MERL materials, made and printed by
+# experiments/light_estimation/merl_lobes.py: roughness of the sharper and the broader lobe, F0 of
+# both, log10 of specular over diffuse albedo (luminance) and of lobe 2 over lobe 1.
+MEASURED_RANGES = {"alpha1": (0.009, 0.365), "alpha2": (0.088, 0.910), "fresnel0": (0.01, 0.36),
+                   "log10_specular_over_diffuse": (-0.07, 2.20), "log10_lobe2_over_lobe1": (-1.24, 1.53)}
+
+
+def random_measured(generator: torch.Generator) -> AnalyticBRDF:
+    """A random material in the span of measured ones: diffuse and two GGX lobes whose
+    roughness, F0 and albedo ratios lie within :data:`MEASURED_RANGES` (log-uniform for the
+    roughness and ratios, uniform for F0); coloured diffuse, grey-to-tinted lobes."""
+    u = torch.rand(14, generator=generator)
+
+    def log_uniform(key: str, x: torch.Tensor, low: float | None = None) -> float:
+        lo, hi = MEASURED_RANGES[key]
+        lo = max(lo, low) if low is not None else lo
+        return float(10 ** (lo + (hi - lo) * x)) if key.startswith("log10") else \
+            float(lo * (hi / lo) ** x)
+
+    diffuse = 0.1 + 0.8 * u[:3]
+    specular_total = float(diffuse.mean()) * log_uniform("log10_specular_over_diffuse", u[3])
+    second_over_first = log_uniform("log10_lobe2_over_lobe1", u[4])
+    first = specular_total / (1 + second_over_first)
+    tints = 0.5 + 0.5 * u[5:11].reshape(2, 3)
+    specular = torch.stack([first * tints[0], first * second_over_first * tints[1]])
+    alpha1 = log_uniform("alpha1", u[11])
+    alpha2 = log_uniform("alpha2", u[12], low=alpha1)
+    lo, hi = MEASURED_RANGES["fresnel0"]
+    fresnel0 = lo + (hi - lo) * torch.rand(2, generator=generator)
+    return AnalyticBRDF(diffuse, specular, (alpha1, alpha2), tuple(map(float, fresnel0)))
 
 
 class TabulatedBRDF(nn.Module):

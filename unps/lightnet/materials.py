@@ -11,7 +11,7 @@ import torch
 import torch.nn.functional as F
 
 from unps.errors import InputError
-from unps.lightnet.brdf import random_analytic, read_merl_binary, read_neural_brdf
+from unps.lightnet.brdf import random_analytic, random_measured, read_merl_binary, read_neural_brdf
 from unps.lightnet.shapes import ShapeMaps, cast_shadows
 
 
@@ -46,18 +46,28 @@ def shade(maps: ShapeMaps, brdf, lights: torch.Tensor, intensities: torch.Tensor
     return images.permute(0, 3, 1, 2)
 
 
+FAMILIES = ("analytic", "merl", "neural", "measured")   # a sample's ``family`` is its index here
+DRAWN = {"analytic": random_analytic, "measured": random_measured}   # the families made, not read
+
+
 class MaterialBank:
-    """Draws materials: analytic lobes, MERL ``.binary`` tables, MERL neural fits, by weight.
+    """Draws materials by weight: analytic lobes, lobes in the span of measured materials,
+    MERL ``.binary`` tables, MERL neural fits.
 
     Args:
-        analytic: weight of random analytic materials (always available).
+        analytic: weight of random analytic materials (:func:`~unps.lightnet.brdf.random_analytic`).
+        measured: weight of analytic materials spanning MERL's
+            (:func:`~unps.lightnet.brdf.random_measured`; no data needed).
         merl_dir, merl: a folder of ``.binary`` files and its weight.
         neural_dir, neural: a folder of neural fits (``.h5``) and its weight.
     """
 
-    def __init__(self, analytic: float = 1.0, merl_dir: str | None = None, merl: float = 0.0,
-                 neural_dir: str | None = None, neural: float = 0.0):
+    def __init__(self, analytic: float = 1.0, measured: float = 0.0, merl_dir: str | None = None,
+                 merl: float = 0.0, neural_dir: str | None = None, neural: float = 0.0):
         self.families, self.weights = ["analytic"], [analytic]
+        if measured > 0:
+            self.families.append("measured")
+            self.weights.append(measured)
         self.files = {}
         for family, folder, weight, suffix in (("merl", merl_dir, merl, ".binary"),
                                                ("neural", neural_dir, neural, ".h5")):
@@ -80,8 +90,8 @@ class MaterialBank:
         if family is None:
             p = torch.tensor(self.weights, dtype=torch.float64)
             family = self.families[int(torch.multinomial(p / p.sum(), 1, generator=generator))]
-        if family == "analytic":
-            return family, random_analytic(generator)
+        if family in DRAWN:
+            return family, DRAWN[family](generator)
         files = self.files[family]
         path = files[int(torch.randint(len(files), (1,), generator=generator))]
         if path not in self._loaded:

@@ -18,7 +18,7 @@ import torch.nn.functional as F
 from torch.utils.data import Dataset
 
 from unps.errors import InputError
-from unps.lightnet.materials import MaterialBank, shade
+from unps.lightnet.materials import FAMILIES, MaterialBank, shade
 from unps.lightnet.rig import LAYOUTS, Camera, draw_lights, record
 from unps.lightnet.shapes import SHAPES, ShapeMaps, check_weights, draw_shape, sample_generator
 
@@ -113,4 +113,4 @@ class LightDataset(Dataset):
         images = images * maps.mask
         return {"images": images.float(), "mask": maps.mask[None].float(),
                 "directions": lights.float(), "intensities": intensities.float(),
-                "family": ["analytic", "merl", "neural"].index(family)}
+                "family": FAMILIES.index(family)}

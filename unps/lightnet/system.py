@@ -13,9 +13,9 @@ from omegaconf import OmegaConf
 
 from unps.errors import InputError
 from unps.lightnet.bins import decode_lights, encode_lights
+from unps.lightnet.materials import FAMILIES
 from unps.lightnet.network import LightNet
 
-FAMILIES = ("analytic", "merl", "neural")
 SHIPPED = Path(__file__).parent / "weights" / "lightnet.pt"
 
 
