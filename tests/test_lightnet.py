@@ -188,6 +188,8 @@ def test_bad_dataset_settings():
         LightDataset(4, resolution=40)
     with pytest.raises(InputError, match="images per sample must lie in 1…64"):
         LightDataset(4, resolution=32, images=65)
+    with pytest.raises(InputError, match="paint is a share of the samples, in 0…1; got 1.5"):
+        LightDataset(4, resolution=32, paint=1.5)
 
 
 # training, checkpoints, estimation --------------------------------------------------------

@@ -104,3 +104,20 @@ def test_bad_shape_and_layout_settings():
         LightDataset(2, resolution=32, layouts={"cap": 0.0})
     with pytest.raises(InputError, match="shape family 'cube' unknown"):
         LightDataset(2, resolution=32, shape="cube")
+
+
+def test_paint_lays_a_few_flat_colours_over_the_same_scene():
+    from unps.lightnet.materials import painted
+
+    albedo = painted(64, sample_generator(0, 5))
+    colours = torch.unique(albedo.reshape(-1, 3), dim=0)
+    assert 2 <= len(colours) <= 4 and (albedo >= 0.05).all() and (albedo <= 1).all()
+    common = dict(resolution=64, images=4, camera=None, perturbation=0.0, saturation=None, texture=0.0)
+    plain = LightDataset(8, **common)
+    paint = LightDataset(8, paint=1.0, **common)
+    for index in range(8):
+        a, b = plain[index], paint[index]
+        torch.testing.assert_close(a["directions"], b["directions"])   # the same scene …
+        lit = (a["images"] > 1e-3) & (b["images"] > 1e-3)
+        ratio = (b["images"][lit] / a["images"][lit]).round(decimals=3)
+        assert 2 <= len(torch.unique(ratio)) <= 12                   # … under a few flat colours

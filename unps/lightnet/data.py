@@ -40,13 +40,14 @@ class LightData(L.LightningDataModule):
         recipe, data = self.recipe, self.data
         meshes = (mesh_views(data.meshes_dir, recipe.resolution, data.views_per_mesh, self.seed)
                   if data.meshes_dir else None)
+        # shapes, layouts, paint, camera: .get, as the configs of older runs lack them
         common = dict(resolution=recipe.resolution, images=recipe.images,
                       lights_per_shape=data.lights_per_shape, max_zenith_deg=data.max_zenith_deg,
                       materials=MaterialBank(**data.materials), meshes=meshes,
                       mesh_fraction=data.mesh_fraction, texture=data.texture,
                       perturbation=data.perturbation, saturation=data.saturation,
                       shapes=data.get("shapes"), layouts=data.get("layouts"),
-                      camera=camera(data.get("camera")))   # absent in runs made before they existed
+                      paint=data.get("paint", 0.0), camera=camera(data.get("camera")))
         done = self.start_step * recipe.batch_size
         remaining = max(recipe.max_steps * recipe.batch_size - done, recipe.batch_size)
         self.train_set = LightDataset(length=remaining, seed=self.seed, offset=done, **common)

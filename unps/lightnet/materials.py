@@ -20,7 +20,7 @@ def shade(maps: ShapeMaps, brdf, lights: torch.Tensor, intensities: torch.Tensor
     """Radiance e · f(l, v) · max(n·l, 0), in shadow 0.
 
     Args:
-        lights: (n, 3); intensities: (n,); albedo: optional (H, W) multiplier.
+        lights: (n, 3); intensities: (n,); albedo: optional (H, W) or (H, W, 3) multiplier.
 
     Returns:
         (n, 3, H, W) float32.
@@ -37,13 +37,31 @@ def shade(maps: ShapeMaps, brdf, lights: torch.Tensor, intensities: torch.Tensor
     with torch.no_grad():
         value = brdf(wi, wo) * wi[..., 2:].clamp_min(0)               # (L, P, 3)
     if albedo is not None:
-        value = value * albedo[m][None, :, None]
+        value = value * (albedo[m][None, :, None] if albedo.dim() == 2 else albedo[m][None])
     value = value * intensities[:, None, None]
     if shadows:
         value = value * (~cast_shadows(maps, lights)[:, m])[..., None]
     images = torch.zeros(len(lights), *m.shape, 3)
     images[:, m] = value
     return images.permute(0, 3, 1, 2)
+
+
+def painted(resolution: int, generator: torch.Generator) -> torch.Tensor:
+    """Paint: one to three colours laid on in patches with sharp edges, as on painted pots and
+    printed labels; (H, W, 3) multipliers in [0.05, 1], 1 where no paint lies.
+
+    Each coat covers where a smooth random field (a 4×4 to 12×12 grid of values, upsampled)
+    exceeds a random level, so patches range from a few blobs to fine stripes and spots.
+    """
+    u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
+    albedo = torch.ones(resolution, resolution, 3)
+    for _ in range(int(torch.randint(1, 4, (1,), generator=generator))):
+        cells = int(torch.randint(4, 13, (1,), generator=generator))
+        field = F.interpolate(u(1, 1, cells, cells), size=(resolution, resolution), mode="bicubic",
+                              align_corners=True)[0, 0]
+        coat = field > 0.35 + 0.3 * float(u(1))
+        albedo[coat] = 0.05 + 0.95 * u(3)
+    return albedo
 
 
 FAMILIES = ("analytic", "merl", "neural", "measured")   # a sample's ``family`` is its index here

@@ -18,7 +18,7 @@ import torch.nn.functional as F
 from torch.utils.data import Dataset
 
 from unps.errors import InputError
-from unps.lightnet.materials import FAMILIES, MaterialBank, shade
+from unps.lightnet.materials import FAMILIES, MaterialBank, painted, shade
 from unps.lightnet.rig import LAYOUTS, Camera, draw_lights, record
 from unps.lightnet.shapes import SHAPES, ShapeMaps, check_weights, draw_shape, sample_generator
 
@@ -33,7 +33,8 @@ class LightDataset(Dataset):
         max_zenith_deg: the light cap.
         materials: a :class:`MaterialBank`.
         meshes: optional shape maps from :func:`mesh_views`, used for ``mesh_fraction`` of samples.
-        texture: largest relative albedo variation over the surface.
+        texture: largest relative albedo variation over the surface (smooth).
+        paint: share of samples with painted patches of other colours (:func:`painted`).
         perturbation: half-width of the uniform noise added to images scaled to a 99th
             percentile of 1.
         saturation: the level, in units of that 99th percentile, where the simulated camera
@@ -57,11 +58,13 @@ class LightDataset(Dataset):
                  intensity_range: tuple[float, float] = (0.2, 2.0), saturation: float | None = 4.0,
                  shapes: dict[str, float] | None = None, layouts: dict[str, float] | None = None,
                  camera: Camera | None = None, seed: int = 0, family: str | None = None,
-                 shape: str | None = None, offset: int = 0):
+                 shape: str | None = None, offset: int = 0, paint: float = 0.0):
         if resolution % 32 or resolution < 32:
             raise InputError(f"resolution must be a multiple of 32, got {resolution}")
         if not 1 <= images <= lights_per_shape:
             raise InputError(f"images per sample must lie in 1…{lights_per_shape}, got {images}")
+        if not 0 <= paint <= 1:
+            raise InputError(f"paint is a share of the samples, in 0…1; got {paint}")
         self.shapes = dict(shapes) if shapes else {"blob": 1.0}
         self.layouts = dict(layouts) if layouts else {"cap": 1.0}
         check_weights(self.shapes, SHAPES, "shape families")
@@ -73,7 +76,7 @@ class LightDataset(Dataset):
         self.lights_per_shape, self.max_zenith_deg = lights_per_shape, max_zenith_deg
         self.materials = materials or MaterialBank()
         self.meshes, self.mesh_fraction = meshes or [], mesh_fraction if meshes else 0.0
-        self.texture, self.perturbation = texture, perturbation
+        self.texture, self.paint, self.perturbation = texture, paint, perturbation
         self.intensity_range, self.seed, self.family = intensity_range, seed, family
         self.offset, self.saturation = offset, saturation
 
@@ -100,6 +103,9 @@ class LightDataset(Dataset):
             coarse = torch.rand(1, 1, 6, 6, generator=g) - 0.5
             albedo = 1 + self.texture * float(u(1)) * 2 * F.interpolate(
                 coarse, size=(self.resolution,) * 2, mode="bicubic", align_corners=True)[0, 0]
+        if self.paint > 0 and float(u(1)) < self.paint:
+            paint = painted(self.resolution, g)
+            albedo = paint if albedo is None else albedo[..., None] * paint
         images = shade(maps, brdf, lights, intensities, albedo)
         values = images[:, :, maps.mask].flatten()
         level = torch.quantile(values[:: max(1, len(values) // 8192)], 0.99).clamp_min(1e-8)
