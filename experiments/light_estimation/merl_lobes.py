@@ -91,7 +91,6 @@ def main() -> None:
     files = sorted(folder.glob("*.h5"))
     if not files:
         raise SystemExit(f"{folder}: no MERL neural fits (*.h5); pass --data")
-    torch.manual_seed(0)
     wi, wo = direction_pairs(16384)
     rows = []
     start = time.perf_counter()
