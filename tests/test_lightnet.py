@@ -218,12 +218,21 @@ def test_two_step_training_writes_checkpoints_and_metrics(trained):
     assert list((out / "tensorboard").glob("events.out.tfevents.*"))
 
 
-def test_training_logs_a_progress_line(tmp_path, caplog):
+def test_training_logs_a_progress_line_per_validation_with_its_figures(tmp_path, caplog):
     caplog.set_level(logging.INFO)
-    train(train_config(tmp_path, "recipe.max_steps=4"))       # validation after step 2
+    metrics = train(train_config(tmp_path, "recipe.max_steps=4"))       # validations after steps 2 and 4
     lines = [r.getMessage() for r in caplog.records]
     assert any(line.startswith("training LightNet on") for line in lines)
-    assert any(line.startswith("step 4/4: loss ") and "validation direction error" in line for line in lines)
+    steps = [line for line in lines if line.startswith("step ")]
+    assert [line.split(":")[0] for line in steps] == ["step 2/4", "step 4/4"]
+    assert f"validation direction error {metrics['val/direction_mae']:.2f}°" in steps[-1]
+
+
+def test_the_last_checkpoint_follows_every_validation_not_only_the_best(tmp_path):
+    train(train_config(tmp_path, "recipe.max_steps=4", "recipe.lr=0"))   # no validation improves
+    saved = {name: torch.load(tmp_path / "checkpoints" / name, weights_only=False)["global_step"]
+             for name in ("best.ckpt", "last.ckpt")}
+    assert saved == {"best.ckpt": 2, "last.ckpt": 4}
 
 
 def test_a_run_stopped_by_its_time_limit_says_how_to_go_on(tmp_path, caplog):

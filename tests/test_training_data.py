@@ -10,6 +10,7 @@ import torch.nn.functional as F
 
 from unps.errors import InputError
 from unps.io.images import read_image, write_png16
+from unps.lightnet import lathe
 from unps.lightnet.rig import FORMATS, LAYOUTS, Camera, draw_lights, quantize, record
 from unps.lightnet.shapes import SHAPES, sample_generator
 from unps.lightnet.synthesis import LightDataset
@@ -40,6 +41,32 @@ def test_vessels_are_concave_where_blobs_are_convex():
         blob = SHAPES["blob"](64, sample_generator(0, index))
         assert concave_share(vessel.depth, vessel.mask) > 0.15
         assert concave_share(blob.depth, blob.mask) < 0.05
+
+
+def test_rasterising_keeps_the_nearest_point_and_its_normal():
+    t = torch.linspace(-0.5, 0.5, 200)
+    square = torch.stack(torch.meshgrid(t, t, indexing="ij"), -1).reshape(-1, 2)
+    near = torch.cat([square, torch.full((len(square), 1), 0.3)], 1)
+    far = torch.cat([square * 1.6, torch.full((len(square), 1), -0.2)], 1)
+    tilted = F.normalize(torch.tensor([0.3, 0.0, 1.0]), dim=0)
+    normals, depth, mask = lathe.rasterise(torch.cat([far, near]), torch.cat(
+        [torch.tensor([0.0, 0, 1]).expand_as(far), tilted.expand_as(near)]), 64)
+    centre, ring = (slice(24, 40),) * 2, (slice(8, 12), slice(28, 36))
+    assert mask[centre].all() and mask[ring].all()
+    torch.testing.assert_close(depth[centre], torch.full((16, 16), 0.3))
+    torch.testing.assert_close(normals[centre], tilted.expand(16, 16, 3))
+    torch.testing.assert_close(depth[ring], torch.full((4, 8), -0.2))
+    assert not mask[:2].any()                                       # beyond both sheets
+
+
+def test_jars_show_their_inside_past_the_near_lip():
+    shown_inside = 0
+    for index in range(6):
+        maps = SHAPES["jar"](64, sample_generator(0, index))
+        rows, cols = torch.gradient(maps.depth)
+        inner = (-F.max_pool2d(-maps.mask[None, None].float(), 3, 1, 1)[0, 0] > 0.5)
+        shown_inside += bool((torch.hypot(rows, cols)[inner] > 0.25).any())   # a step at the lip (other families: < 0.16)
+    assert shown_inside >= 5
 
 
 @pytest.mark.parametrize("layout", LAYOUTS)

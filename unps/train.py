@@ -26,7 +26,6 @@ from unps.errors import InputError, exit_on_bad_input
 
 log = logging.getLogger("unps.train")
 
-PROGRESS_EVERY = 250   # steps between progress lines
 PROGRESS = (("loss", "train/loss", "{:.3f}"), ("validation direction error", "val/direction_mae", "{:.2f}°"))
 RUN_LENGTH = ("recipe.max_steps", "recipe.max_time")    # what the command line may change on resuming
 NOT_THE_RUN = ("ckpt_path", "paths.output_dir")          # where to resume from and write, not what
@@ -133,10 +132,12 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
         max_steps=cfg.recipe.max_steps, max_time=cfg.recipe.max_time,
         val_check_interval=cfg.recipe.val_every, check_val_every_n_epoch=None,
         default_root_dir=out, logger=TensorBoardLogger(str(out), name="tensorboard", version=""),
-        callbacks=[ModelCheckpoint(dirpath=out / "checkpoints", save_last=True,
-                                   monitor="val/direction_mae", mode="min", save_top_k=1,
-                                   filename="best"),
-                   LightSamples(), LearningRateMonitor(), ProgressLog(PROGRESS_EVERY, PROGRESS, log)],
+        callbacks=[ModelCheckpoint(dirpath=out / "checkpoints", monitor="val/direction_mae", mode="min",
+                                   save_top_k=1, filename="best"),
+                   ModelCheckpoint(dirpath=out / "checkpoints", save_last=True, save_top_k=0,
+                                   every_n_train_steps=cfg.recipe.val_every),
+                   LightSamples(), LearningRateMonitor(),
+                   ProgressLog(shown=PROGRESS, logger=log, after_validation=True)],
         accelerator="auto", devices=1, log_every_n_steps=cfg.recipe.log_every,
         enable_progress_bar=False, enable_model_summary=False, deterministic=False)
     log.info("training %s on %d threads: %d steps of %d samples (%d px, %d images), at most %s; "

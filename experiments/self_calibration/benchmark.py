@@ -2,6 +2,7 @@
 
     python experiments/self_calibration/benchmark.py                 # everything (~25 min, 2 cores)
     python experiments/self_calibration/benchmark.py --subjects ball cat pot1 --no-perturbation
+    python experiments/self_calibration/benchmark.py --symmetric --align none --no-perturbation
 
 1. Per subject (DiLiGenT ball, cat, pot1 read as made, all 96 images; unps's rendered subjects,
    rendered and cached on first use): light direction MAE of the network, after the cast-shadow
@@ -71,14 +72,17 @@ def rpca_error(subject, lights: Lights) -> float:
     return normal_metrics(estimate.normals, subject.normals, subject.mask)["normal_mae"]
 
 
-def compare(names, data: Path, settings: SelfCalibration) -> None:
+def compare(names, data: Path, settings: SelfCalibration, symmetric: bool = False,
+            align: bool = True) -> None:
+    """One row per subject; ``symmetric`` and ``align`` as ``light.symmetric`` and
+    ``light.align=contour`` (False: the contour column repeats the reversal's)."""
     print(f"{'subject':<10} {'network':>8} {'reversal':>8} {'contour':>8} {'selfcal':>8} {'int err':>8} │ "
           f"{'RPCA with: network':>19} {'contour':>8} {'selfcal':>8} {'GT':>6} │ {'time':>6}")
     for name, subject in available(names, data):
         truth = Lights(subject.light_directions, subject.light_intensities, "gt")
-        network = network_estimate(subject, None, soft_decode=True)
+        network = network_estimate(subject, None, soft_decode=True, symmetric=symmetric)
         tested, normals = resolve_reversal(subject, network)
-        contour = align_to_contour(subject, tested, normals)
+        contour = align_to_contour(subject, tested, normals) if align else tested
         start = time.perf_counter()
         selfcal = self_calibrate(subject, contour, settings)
         runtime = time.perf_counter() - start
@@ -126,12 +130,16 @@ def main():
                         help="subjects of the perturbation protocol")
     parser.add_argument("--no-perturbation", action="store_true")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--symmetric", action="store_true",
+                        help="average the network over the 8 symmetries (light.symmetric=true)")
+    parser.add_argument("--align", choices=("contour", "none"), default="contour",
+                        help="as light.align (none: null)")
     parser.add_argument("--verbose", action="store_true", help="the self-calibration's progress")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(name)s: %(message)s")
     settings = SelfCalibration()
-    compare(args.subjects, args.data, settings)
+    compare(args.subjects, args.data, settings, args.symmetric, args.align == "contour")
     if not args.no_perturbation:
         perturbation(args.perturb, args.data, settings, args.seed)
 

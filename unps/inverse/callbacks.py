@@ -77,9 +77,12 @@ class ProgressLog(L.Callback):
     FIT = (("loss", "loss/reconstruction", "{:.4f}"), ("normal error", "mae", "{:.2f}°"))
 
     def __init__(self, every: int = 100, shown: tuple[tuple[str, str, str], ...] = FIT,
-                 logger: logging.Logger = log):
-        """``shown``: (label, logged metric, format) of each figure on the line, when logged."""
+                 logger: logging.Logger = log, after_validation: bool = False):
+        """``shown``: (label, logged metric, format) of each figure on the line, when logged.
+        ``after_validation``: one line at the end of each validation instead of every ``every``
+        steps, so that the line carries the figures of the validation just run."""
         self.every, self.shown, self._log = every, shown, logger
+        self.after_validation = after_validation
         self._start: float | None = None
         self._first_step = 0
 
@@ -89,15 +92,22 @@ class ProgressLog(L.Callback):
     @rank_zero_only
     def on_train_batch_end(self, trainer, module, outputs, batch, batch_idx) -> None:
         step = trainer.global_step
-        if step % self.every and step != trainer.max_steps:
-            return
-        done = step - self._first_step
-        per_step = (time.perf_counter() - self._start) / max(done, 1)
+        if not self.after_validation and (step % self.every == 0 or step == trainer.max_steps):
+            self._line(trainer)
+
+    @rank_zero_only
+    def on_validation_end(self, trainer, module) -> None:
+        if self.after_validation and not trainer.sanity_checking and self._start is not None:
+            self._line(trainer)
+
+    def _line(self, trainer) -> None:
+        step = trainer.global_step
+        per_step = (time.perf_counter() - self._start) / max(step - self._first_step, 1)
         metrics = trainer.callback_metrics
         shown = [f"{label} {form.format(float(metrics[key]))}" for label, key, form in self.shown
                  if key in metrics]
         self._log.info("step %d/%d: %s (%.3f s/step, %s left)", step, trainer.max_steps, ", ".join(shown),
-                 per_step, duration(per_step * (trainer.max_steps - step)))
+                       per_step, duration(per_step * (trainer.max_steps - step)))
 
 
 def duration(seconds: float) -> str:

@@ -1,4 +1,4 @@
-"""Scenes for the light network's training data: shapes as normal and depth maps, in four
+"""Scenes for the light network's training data: shapes as normal and depth maps, in five
 families (:data:`SHAPES`) or from meshes, and the shadows they cast.
 
 Frame: x right, y up, z toward the camera; the orthographic view covers [−1, 1]², so one
@@ -19,6 +19,7 @@ import torch.nn.functional as F
 
 from unps import geometry
 from unps.errors import InputError
+from unps.lightnet import lathe
 
 
 @dataclass(frozen=True)
@@ -117,7 +118,31 @@ def sculpture(resolution: int, generator: torch.Generator) -> ShapeMaps:
     return maps_from_depth(z, _eroded(mask))
 
 
-SHAPES = {"blob": blob, "vessel": vessel, "relief": relief, "sculpture": sculpture}
+def jar(resolution: int, generator: torch.Generator) -> ShapeMaps:
+    """A jar, vase or cup (an open surface of revolution with a random profile and wall) tilted
+    0–85° away from looking into its mouth: the near lip hides part of the cavity, the far inner
+    wall stands up behind it (:mod:`unps.lightnet.lathe`)."""
+    u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
+    k = torch.arange(1, 4)
+    waves, phases = (u(3) - 0.5) * 0.5 / k, 2 * math.pi * u(3)
+
+    def radius(h: torch.Tensor) -> torch.Tensor:
+        return 0.5 * (1 + (waves * torch.cos(math.pi * k * h[:, None] + phases)).sum(-1))
+
+    height, floor, wall = 0.5 + 1.5 * float(u(1)), 0.05 + 0.55 * float(u(1)), 0.01 + 0.05 * float(u(1))
+    points, normals = lathe.profile_points(radius, height, floor, wall, samples=4 * resolution)
+    tilt, turn = math.radians(85) * float(u(1)), 2 * math.pi * float(u(1))
+    c, s, ct, st = math.cos(tilt), math.sin(tilt), math.cos(turn), math.sin(turn)
+    rotation = torch.tensor([[ct, -st, 0], [st, ct, 0], [0, 0, 1.0]]) @ torch.tensor(   # tilt about x,
+        [[1.0, 0, 0], [0, c, -s], [0, s, c]])                                           # turn about z
+    points, normals = points @ rotation.T, normals @ rotation.T
+    low, high = points.min(0).values, points.max(0).values
+    extent = 1.8 * (0.75 + 0.25 * float(u(1)))                    # of the view's width 2
+    points = (points - (low + high) / 2) * (extent / float((high - low)[:2].max()))
+    return ShapeMaps(*lathe.rasterise(points, normals, resolution))
+
+
+SHAPES = {"blob": blob, "vessel": vessel, "relief": relief, "sculpture": sculpture, "jar": jar}
 
 
 def draw_shape(weights: dict[str, float], resolution: int, generator: torch.Generator,
