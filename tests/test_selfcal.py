@@ -121,6 +121,7 @@ def test_light_selfcal_in_a_fit_logs_each_stage_and_draws_the_lights(tmp_path, c
     with initialize_config_module(config_module="unps.conf", version_base="1.3"):
         cfg = compose("fit", overrides=[f"paths.output_dir={tmp_path}", "subject=lambertian",
                                         "subject.size=32", "light=selfcal", "method=woodham",
+                                        "light.align=contour",   # every stage, the optional one too
                                         "light.selfcal.steps=60", "light.selfcal.reference_steps=20"])
     with caplog.at_level("INFO"):
         metrics = fit(cfg)

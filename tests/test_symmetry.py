@@ -41,9 +41,9 @@ def test_mean_direction_and_spread():
     torch.testing.assert_close(spread, torch.tensor([45.0]))
 
 
-def test_symmetric_estimate_reports_its_spread_and_one_pass_does_not(sphere):
-    symmetric = estimate_lights(sphere, symmetric=True, align=None)
-    one_pass = estimate_lights(sphere, align=None)
+def test_the_default_estimate_is_symmetric_and_reports_its_spread_one_pass_does_not(sphere):
+    symmetric = estimate_lights(sphere)
+    one_pass = estimate_lights(sphere, symmetric=False)
     assert symmetric.spread_deg.shape == (sphere.n_images,) and (symmetric.spread_deg >= 0).all()
     assert one_pass.spread_deg is None
     np.testing.assert_allclose(np.linalg.norm(symmetric.directions, axis=1), 1, atol=1e-5)

@@ -62,7 +62,7 @@ def diligent(data: Path, checkpoint, quantization: str = "auto"):
         except InputError as e:
             print(f"{name:<6} skipped: {e}")
             continue
-        lights = estimate_lights(subject, checkpoint, reversal=None, align=None)
+        lights = estimate_lights(subject, checkpoint, symmetric=False, reversal=None, align=None)
         averaged = estimate_lights(subject, checkpoint, symmetric=True, reversal=None, align=None)
         tested, normals = resolve_reversal(subject, lights)
         aligned = align_to_contour(subject, tested, normals)
@@ -98,7 +98,7 @@ def sparse(data: Path, checkpoint, counts=(16, 12, 8), draws: int = 5):
             errors = []
             for _ in range(draws):
                 subset = subject.select(np.sort(rng.choice(subject.n_images, count, replace=False)))
-                lights = estimate_lights(subset, checkpoint, reversal=None, align=None)
+                lights = estimate_lights(subset, checkpoint, symmetric=False, reversal=None, align=None)
                 errors.append(light_errors(lights, subset)["light_dir_mae"])
             cells.append(f"{np.mean(errors):5.2f} ± {np.std(errors):4.2f}°")
         print(f"{name:<42} " + "   ".join(cells), flush=True)
@@ -113,7 +113,7 @@ def renders(names: list[str], checkpoint):
     with initialize_config_module("unps.conf", version_base=None):
         for name in names:
             subject = instantiate(compose("fit", overrides=[f"subject={name}"]).subject, _partial_=True)()
-            lights = estimate_lights(subject, checkpoint, reversal=None, align=None)
+            lights = estimate_lights(subject, checkpoint, symmetric=False, reversal=None, align=None)
             averaged = estimate_lights(subject, checkpoint, symmetric=True, reversal=None, align=None)
             tested, normals = resolve_reversal(subject, lights)
             aligned = align_to_contour(subject, tested, normals)

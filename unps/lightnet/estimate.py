@@ -57,8 +57,8 @@ def network_input(images: np.ndarray, mask: np.ndarray, resolution: int
 
 
 def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode: bool = True,
-                    symmetric: bool = False, reversal: str | None = "shadows",
-                    align: str | None = "contour", selfcal: SelfCalibration | None = None) -> Lights:
+                    symmetric: bool = True, reversal: str | None = "shadows",
+                    align: str | None = None, selfcal: SelfCalibration | None = None) -> Lights:
     """Directions and relative intensities of every image, from the captured images alone.
 
     Args:

@@ -1,7 +1,8 @@
 """Self-calibration (``light=selfcal``): the lights fitted to the images themselves.
 
-Starting from a first guess (the light network's estimate after contour alignment), the lights
-are fitted jointly with a depth map, an RGB albedo and shared specular lobes
+Starting from a first guess (the light network's estimate,
+:func:`unps.lightnet.estimate.estimate_lights`), the lights are fitted jointly with a depth map,
+an RGB albedo and shared specular lobes
 (:class:`unps.lights.model.SelfCalibrationModel`) so that the rendered images match the captured
 ones, in the spirit of SCPS-NIR (Li & Li, ECCV 2022) but with an explicit reflectance model small
 enough for a CPU:
