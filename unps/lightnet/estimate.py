@@ -90,7 +90,9 @@ def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode
         raise InputError(f"light.align must be contour or null, got {align!r}")
     with stage("light network"):
         lights = network_estimate(subject, checkpoint, soft_decode, symmetric)
-    log_stage(f"network ({checkpoint or 'shipped weights'})", lights, subject)
+    weights = checkpoint or "shipped weights"
+    log_stage(f"network ({weights}, mean of 8 symmetries)" if symmetric else f"network ({weights})",
+              lights, subject)
     spread = lights.spread_deg
     if spread is not None:
         warn_if_uncertain(spread)
