@@ -327,15 +327,17 @@ def test_slant_script_remeasures_runs_and_their_seed_ensemble(tmp_path, capsys, 
 
 
 def test_concave_failures_tells_a_half_turn_from_a_distortion():
+    from unps.lights.contour import best_rotation
+
     failures = load_script("concave_failures", "experiments/light_estimation/concave_failures.py")
     truth = np.random.default_rng(0).normal(size=(40, 3)) * [0.4, 0.4, 1.0]
     truth = truth * np.sign(truth[:, 2:]) / np.linalg.norm(truth, axis=1, keepdims=True)
     half_turn = truth * [-1, -1, 1]
-    rotation = failures.best_rotation(truth, half_turn)
+    rotation = best_rotation(truth, half_turn)
     np.testing.assert_allclose(rotation, np.diag([-1.0, -1, 1]), atol=1e-9)
     assert failures.mapped_error(rotation, truth, half_turn) < 1e-4
     relief = np.array([[1.0, 0, 0.3], [0, 1, -0.2], [0, 0, 0.6]])     # a bas-relief-like map
     distorted = truth @ relief.T
     distorted /= np.linalg.norm(distorted, axis=1, keepdims=True)
-    assert failures.mapped_error(failures.best_rotation(truth, distorted), truth, distorted) > 3
+    assert failures.mapped_error(best_rotation(truth, distorted), truth, distorted) > 3
     assert failures.mapped_error(failures.best_linear(truth, distorted), truth, distorted) < 2

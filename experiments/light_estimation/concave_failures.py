@@ -23,6 +23,7 @@ from hydra import compose, initialize_config_module
 from hydra.utils import instantiate
 
 from unps.lightnet.estimate import network_estimate
+from unps.lights.contour import best_rotation, rotation_angle
 from unps.metrics import light_direction_mae
 
 
@@ -32,13 +33,6 @@ def render(name: str, max_depth: int, spp: int):
     with initialize_config_module("unps.conf", version_base=None):
         spec = compose("fit", overrides=overrides).subject
     return instantiate(spec, _partial_=True)()
-
-
-def best_rotation(truth: np.ndarray, estimate: np.ndarray) -> np.ndarray:
-    """(3, 3) proper rotation R minimising Σ‖R·tᵢ − eᵢ‖² (Kabsch); rows of (n, 3) unit vectors."""
-    u, _, vt = np.linalg.svd(estimate.T @ truth)
-    flip = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
-    return u @ flip @ vt
 
 
 def best_linear(truth: np.ndarray, estimate: np.ndarray) -> np.ndarray:
@@ -77,8 +71,7 @@ def main():
         truth = subject.light_directions.astype(np.float64)
         estimate = estimate.astype(np.float64)
         rotation = best_rotation(truth, estimate)
-        angle = np.degrees(np.arccos(np.clip((np.trace(rotation) - 1) / 2, -1, 1)))
-        print(f"{name:<36} {errors[2]:9.2f}°   {errors[5]:13.2f}°     │   {angle:11.1f}°  "
+        print(f"{name:<36} {errors[2]:9.2f}°   {errors[5]:13.2f}°     │   {rotation_angle(rotation):11.1f}°  "
               f"{mapped_error(rotation, truth, estimate):8.2f}°   "
               f"{mapped_error(best_linear(truth, estimate), truth, estimate):14.2f}°", flush=True)
 

@@ -75,13 +75,19 @@ def contour_rotation(normals: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray 
         return None, f"{count} pixels of occluding contour off the image border, fewer than " \
                      f"{MIN_CONTOUR_PIXELS}"
     estimated = normals[contour].astype(np.float64)
-    u, _, vt = np.linalg.svd(outward[contour].T @ estimated)                    # Σ t nᵀ
-    rotation = u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
+    rotation = best_rotation(estimated, outward[contour])
     misfit = float(np.median(angular_error(estimated @ rotation.T, outward[contour])))
     if misfit > MAX_CONTOUR_MISFIT:
         return None, f"the outline's normals stay {misfit:.1f}° (median) from facing sideways " \
                      f"after the best rotation, more than {MAX_CONTOUR_MISFIT:.0f}°"
     return rotation, f"{count} contour pixels, median misfit {misfit:.1f}°"
+
+
+def best_rotation(source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """(3, 3) proper rotation R maximising Σ tᵢ·(R sᵢ) (Kabsch), for rows sᵢ of ``source`` and
+    tᵢ of ``target``, both (n, 3); for unit vectors it minimises Σ‖R sᵢ − tᵢ‖²."""
+    u, _, vt = np.linalg.svd(target.T @ source)                                 # Σ t sᵀ
+    return u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
 
 
 def rotation_angle(rotation: np.ndarray) -> float:
