@@ -69,6 +69,22 @@ def test_jars_show_their_inside_past_the_near_lip():
     assert shown_inside >= 5
 
 
+
+def interior_tilt(family: str, index: int) -> float:
+    """90th percentile of the angle (degrees) between a shape's normals 4 px inside its outline
+    and their mean direction."""
+    maps = SHAPES[family](64, sample_generator(0, index))
+    inner = -F.max_pool2d(-maps.mask[None, None].float(), 9, 1, 4)[0, 0] > 0.5
+    normals = maps.normals[inner]
+    mean = F.normalize(normals.mean(0), dim=0)
+    return float(torch.rad2deg(torch.acos((normals @ mean).clamp(-1, 1))).quantile(0.9))
+
+
+def test_slabs_are_shallow_where_reliefs_are_steep():
+    for index in range(6):
+        assert interior_tilt("slab", index) < 25
+        assert interior_tilt("relief", index) > 35
+
 @pytest.mark.parametrize("layout", LAYOUTS)
 def test_light_layouts_give_unit_directions_toward_the_camera(layout):
     lights = draw_lights({layout: 1.0}, 64, 60.0, sample_generator(1, 2))

@@ -1,4 +1,4 @@
-"""Scenes for the light network's training data: shapes as normal and depth maps, in five
+"""Scenes for the light network's training data: shapes as normal and depth maps, in six
 families (:data:`SHAPES`) or from meshes, and the shadows they cast.
 
 Frame: x right, y up, z toward the camera; the orthographic view covers [−1, 1]², so one
@@ -99,6 +99,54 @@ def relief(resolution: int, generator: torch.Generator) -> ShapeMaps:
     return maps_from_depth(z, mask)
 
 
+def slab(resolution: int, generator: torch.Generator) -> ShapeMaps:
+    """A clay tablet, plaque or coin: a thin slab whose edges round off, low reliefs a few
+    hundredths of its width high, short incised grooves, a slight dish or dome and at times a
+    broad hollow; turned about the view axis and tilted up to 14°. Shallow where ``relief``'s
+    patches are deep: under the bas-relief ambiguity the network needs both to learn how deep
+    reliefs are."""
+    u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
+    x, y, _, _ = _plane(resolution)
+    angle = math.pi * float(u(1))
+    across = x * math.cos(angle) + y * math.sin(angle)
+    along = -x * math.sin(angle) + y * math.cos(angle)
+    half_w, half_h = 0.5 + 0.4 * float(u(1)), 0.5 + 0.4 * float(u(1))
+    corner = (0.05 + 0.9 * float(u(1))) * min(half_w, half_h)   # a rounded rectangle to an oval
+    qx, qy = across.abs() - half_w + corner, along.abs() - half_h + corner
+    inside = -(torch.hypot(qx.clamp_min(0), qy.clamp_min(0)) + torch.maximum(qx, qy).clamp_max(0)
+               - corner)                                          # distance from the outline
+    mask = inside > 0
+    edge = 0.03 + 0.15 * float(u(1))
+    t = (inside / edge).clamp(0, 1)
+    rounded = float(u(1))                                         # smoothstep to quarter-ellipse
+    profile = (1 - rounded) * t * t * (3 - 2 * t) + rounded * torch.sqrt(1 - (1 - t) ** 2)
+    z = edge * (0.3 + 1.2 * float(u(1))) * profile
+    z = z + (float(u(1)) - 0.4) * 0.15 * (1 - (across / half_w) ** 2) * (1 - (along / half_h) ** 2)
+    if float(u(1)) < 0.4:
+        cx, cy = (u(2) - 0.5) * 0.6
+        width = 0.15 + 0.25 * float(u(1))
+        z = z - 0.25 * float(u(1)) * torch.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2 * width ** 2))
+    for _ in range(int(11 * u(1))):                               # low raised patches
+        cx, cy = (u(2) - 0.5) * 1.4
+        rx, ry = 0.04 + 0.2 * u(2)
+        turn = math.pi * float(u(1))
+        a = ((x - cx) * math.cos(turn) + (y - cy) * math.sin(turn)) / rx
+        b = (-(x - cx) * math.sin(turn) + (y - cy) * math.cos(turn)) / ry
+        height = 0.005 * 10 ** float(u(1))                        # 0.005-0.05, log-uniform
+        z = z + height * torch.sigmoid((1 - torch.maximum(a.abs(), b.abs())) / (0.05 + 0.2 * float(u(1))))
+    grooves = int(150 * u(1))                                     # short incised V grooves
+    start, turn = (u(grooves, 2, 1, 1) - 0.5) * 1.6, math.pi * u(grooves, 1, 1)
+    length, width = 0.03 + 0.1 * u(grooves, 1, 1), 0.01 + 0.025 * u(grooves, 1, 1)
+    px, py = x - start[:, 0], y - start[:, 1]
+    s = torch.minimum((px * torch.cos(turn) + py * torch.sin(turn)).clamp_min(0), length)
+    distance = torch.hypot(px - s * torch.cos(turn), py - s * torch.sin(turn))
+    depth = 0.008 + 0.025 * u(grooves, 1, 1)
+    z = z - (depth * (1 - distance / width).clamp_min(0)).sum(0)
+    tilt = (u(2) - 0.5) * 0.5
+    z = z + tilt[0] * x + tilt[1] * y
+    return maps_from_depth(z, _eroded(mask))
+
+
 def sculpture(resolution: int, generator: torch.Generator) -> ShapeMaps:
     """Several blobs fused into one: where their surfaces meet, deep creases and crevices; the
     whole surface carries a fine random displacement."""
@@ -142,7 +190,8 @@ def jar(resolution: int, generator: torch.Generator) -> ShapeMaps:
     return ShapeMaps(*lathe.rasterise(points, normals, resolution))
 
 
-SHAPES = {"blob": blob, "vessel": vessel, "relief": relief, "sculpture": sculpture, "jar": jar}
+SHAPES = {"blob": blob, "vessel": vessel, "relief": relief, "slab": slab, "sculpture": sculpture,
+          "jar": jar}
 
 
 def draw_shape(weights: dict[str, float], resolution: int, generator: torch.Generator,
