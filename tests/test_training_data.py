@@ -69,7 +69,6 @@ def test_jars_show_their_inside_past_the_near_lip():
     assert shown_inside >= 5
 
 
-
 def interior_tilt(family: str, index: int) -> float:
     """90th percentile of the angle (degrees) between a shape's normals 4 px inside its outline
     and their mean direction."""
@@ -84,6 +83,7 @@ def test_slabs_are_shallow_where_reliefs_are_steep():
     for index in range(6):
         assert interior_tilt("slab", index) < 25
         assert interior_tilt("relief", index) > 35
+
 
 @pytest.mark.parametrize("layout", LAYOUTS)
 def test_light_layouts_give_unit_directions_toward_the_camera(layout):

@@ -80,9 +80,7 @@ def relief(resolution: int, generator: torch.Generator) -> ShapeMaps:
     whose sharp edges cast shadows."""
     u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
     x, y, _, _ = _plane(resolution)
-    angle = (u(1) - 0.5) * 0.6
-    across = x * math.cos(angle) + y * math.sin(angle)
-    along = -x * math.sin(angle) + y * math.cos(angle)
+    across, along = _turned(x, y, (u(1) - 0.5) * 0.6)
     half_w, half_h = 0.55 + 0.35 * u(1), 0.55 + 0.35 * u(1)
     mask = (across.abs() < half_w) & (along.abs() < half_h)
     tilt = (u(2) - 0.5) * 0.5
@@ -90,9 +88,8 @@ def relief(resolution: int, generator: torch.Generator) -> ShapeMaps:
     for _ in range(int(4 + 10 * u(1))):
         cx, cy = (u(2) - 0.5) * 1.6
         rx, ry = 0.04 + 0.3 * u(2)
-        turn = math.pi * float(u(1))
-        a = ((x - cx) * math.cos(turn) + (y - cy) * math.sin(turn)) / rx
-        b = (-(x - cx) * math.sin(turn) + (y - cy) * math.cos(turn)) / ry
+        a, b = _turned(x - cx, y - cy, math.pi * float(u(1)))
+        a, b = a / rx, b / ry
         edge = 0.02 + 0.15 * u(1)                         # soft (rounded) to sharp (stepped) edges
         height = (u(1) - 0.45) * 0.25 * min(float(rx), float(ry)) / 0.1
         z = z + height * torch.sigmoid((1 - torch.hypot(a, b)) / edge)
@@ -107,9 +104,7 @@ def slab(resolution: int, generator: torch.Generator) -> ShapeMaps:
     reliefs are."""
     u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
     x, y, _, _ = _plane(resolution)
-    angle = math.pi * float(u(1))
-    across = x * math.cos(angle) + y * math.sin(angle)
-    along = -x * math.sin(angle) + y * math.cos(angle)
+    across, along = _turned(x, y, math.pi * float(u(1)))
     half_w, half_h = 0.5 + 0.4 * float(u(1)), 0.5 + 0.4 * float(u(1))
     corner = (0.05 + 0.9 * float(u(1))) * min(half_w, half_h)   # a rounded rectangle to an oval
     qx, qy = across.abs() - half_w + corner, along.abs() - half_h + corner
@@ -129,17 +124,17 @@ def slab(resolution: int, generator: torch.Generator) -> ShapeMaps:
     for _ in range(int(11 * u(1))):                               # low raised patches
         cx, cy = (u(2) - 0.5) * 1.4
         rx, ry = 0.04 + 0.2 * u(2)
-        turn = math.pi * float(u(1))
-        a = ((x - cx) * math.cos(turn) + (y - cy) * math.sin(turn)) / rx
-        b = (-(x - cx) * math.sin(turn) + (y - cy) * math.cos(turn)) / ry
+        a, b = _turned(x - cx, y - cy, math.pi * float(u(1)))
+        a, b = a / rx, b / ry
         height = 0.005 * 10 ** float(u(1))                        # 0.005-0.05, log-uniform
         z = z + height * torch.sigmoid((1 - torch.maximum(a.abs(), b.abs())) / (0.05 + 0.2 * float(u(1))))
     grooves = int(150 * u(1))                                     # short incised V grooves
     start, turn = (u(grooves, 2, 1, 1) - 0.5) * 1.6, math.pi * u(grooves, 1, 1)
     length, width = 0.03 + 0.1 * u(grooves, 1, 1), 0.01 + 0.025 * u(grooves, 1, 1)
     px, py = x - start[:, 0], y - start[:, 1]
-    s = torch.minimum((px * torch.cos(turn) + py * torch.sin(turn)).clamp_min(0), length)
-    distance = torch.hypot(px - s * torch.cos(turn), py - s * torch.sin(turn))
+    cos, sin = torch.cos(turn), torch.sin(turn)
+    s = torch.minimum((px * cos + py * sin).clamp_min(0), length)
+    distance = torch.hypot(px - s * cos, py - s * sin)
     depth = 0.008 + 0.025 * u(grooves, 1, 1)
     z = z - (depth * (1 - distance / width).clamp_min(0)).sum(0)
     tilt = (u(2) - 0.5) * 0.5
@@ -219,6 +214,12 @@ def _plane(resolution: int) -> tuple[torch.Tensor, ...]:
     t = torch.linspace(-1, 1, resolution)
     y, x = -t[:, None].expand(resolution, resolution), t[None, :].expand(resolution, resolution)
     return x, y, torch.atan2(y, x), torch.hypot(x, y)
+
+
+def _turned(x: torch.Tensor, y: torch.Tensor, angle) -> tuple[torch.Tensor, torch.Tensor]:
+    """Coordinates along axes turned by ``angle`` (radians, a float or a one-element tensor)."""
+    c, s = math.cos(angle), math.sin(angle)
+    return x * c + y * s, -x * s + y * c
 
 
 def _eroded(mask: torch.Tensor) -> torch.Tensor:
