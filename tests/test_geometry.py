@@ -1,8 +1,10 @@
 import numpy as np
 import pytest
+import torch
 
 from unps.data.analytic import height_field
 from unps.grid import Frame
+from unps import geometry
 from unps.geometry import depth_to_mesh, integrate_normals
 from unps.io.mesh import write_ply
 
@@ -46,3 +48,38 @@ def test_mesh_faces_point_to_the_camera_and_follow_the_frame(tmp_path):
     np.testing.assert_array_equal(verts[:, :3], v)
     faces = np.frombuffer(body[8 * 24:], dtype=[("n", "u1"), ("v", "<i4", (3,))])
     np.testing.assert_array_equal(faces["v"], f)
+
+
+def marched_everywhere(depth, mask, lights, pitch, steps):
+    """Reference shadows: every object pixel, every light, every sample along the diagonal."""
+    h, w = depth.shape
+    out = np.zeros((len(lights), h, w), bool)
+    distances = np.linspace(1, np.hypot(h, w), steps)
+    for k, (lx, ly, lz) in enumerate(lights):
+        planar = max(np.hypot(lx, ly), 1e-6)
+        for row, col in zip(*np.nonzero(mask)):
+            for d in distances:
+                r, c = int(np.round(row - d * ly / planar)), int(np.round(col + d * lx / planar))
+                if 0 <= r < h and 0 <= c < w and mask[r, c] and \
+                        depth[r, c] > depth[row, col] + d * pitch * lz / planar + 1e-3:
+                    out[k, row, col] = True
+                    break
+    return out
+
+
+def test_cast_shadows_match_marching_every_sample_along_every_ray():
+    rng = np.random.default_rng(3)
+    y, x = np.mgrid[-1:1:24j, -1:1:24j]
+    depth = (0.6 * np.exp(-((x - 0.2) ** 2 + y ** 2) / 0.05) - 0.4 * np.exp(-((x + 0.4) ** 2 + (y - 0.3) ** 2) / 0.1)
+             + 0.05 * rng.standard_normal((24, 24))).astype(np.float32)
+    mask = np.hypot(x, y) < 0.95
+    lights = rng.standard_normal((12, 3))
+    lights[:, 2] = np.abs(lights[:, 2]) + np.linspace(0, 3, 12)     # grazing to nearly overhead
+    lights[0] = [0, 0, 1]
+    lights /= np.linalg.norm(lights, axis=1, keepdims=True)
+    for pitch in (2 / 23, 0.5):
+        got = geometry.cast_shadows(torch.as_tensor(depth), torch.as_tensor(mask),
+                                    torch.as_tensor(lights, dtype=torch.float32), pitch, steps=20, chunk=5)
+        expected = marched_everywhere(depth, mask, lights.astype(np.float32), pitch, 20)
+        assert expected.any() and not expected[0].any()
+        np.testing.assert_array_equal(got.numpy(), expected)

@@ -4,6 +4,7 @@ import math
 import numpy as np
 import pytest
 import torch
+from torch.utils.flop_counter import FlopCounterMode
 from hydra import compose, initialize_config_module
 
 from conftest import SHARED_DATA, load_script
@@ -12,7 +13,7 @@ from unps.lightnet import bins
 from unps.lightnet.brdf import (AnalyticBRDF, MERL_SHAPE, ggx_lobe, half_diff_angles,
                                 read_merl_binary, read_neural_brdf)
 from unps.lightnet.estimate import estimate_lights, network_input
-from unps.lightnet.network import LightNet
+from unps.lightnet.network import LATE_STRIDES, LCNET_STRIDES, LightNet
 from unps.lightnet.shapes import cast_shadows, maps_from_depth
 from unps.lightnet.synthesis import LightDataset
 from unps.lightnet.system import load_lightnet
@@ -249,7 +250,7 @@ def test_checkpoint_restores_the_same_network(trained):
     saved = torch.load(out / "checkpoints" / "last.ckpt", weights_only=False)
     net, config = load_lightnet(out / "checkpoints" / "last.ckpt")
     assert config["light"]["width"] == 8 and isinstance(net, LightNet)
-    reference = LightNet(8, 16)
+    reference = LightNet(8, 16, tuple(config["light"]["strides"]))
     reference.load_state_dict({k[4:]: v for k, v in saved["state_dict"].items()})
     x, m = torch.rand(1, 5, 3, 32, 32), torch.ones(1, 1, 32, 32)
     for key, value in reference.eval()(x, m).items():
@@ -385,6 +386,46 @@ def test_fine_tuning_starts_from_given_weights(trained, tmp_path):
     tuned, _ = load_lightnet(tmp_path / "checkpoints" / "last.ckpt")
     for a, b in zip(start.parameters(), tuned.parameters()):
         torch.testing.assert_close(a, b, atol=1e-6, rtol=0)
-    with pytest.raises(InputError, match="fine-tuning needs the same architecture"):
+    with pytest.raises(InputError, match="fine-tuning needs the same layers"):
         train(train_config(tmp_path / "other", "light.width=16",
                            f"init_weights={out / 'checkpoints' / 'last.ckpt'}"))
+
+
+def test_fine_tuning_may_move_the_strides_and_keeps_the_weights(trained, tmp_path):
+    out, _ = trained
+    start, config = load_lightnet(out / "checkpoints" / "last.ckpt")
+    other = LCNET_STRIDES if tuple(config["light"]["strides"]) == LATE_STRIDES else LATE_STRIDES
+    train(train_config(tmp_path, "recipe.max_steps=1", "recipe.lr=1e-12",
+                       f"light.strides=[{','.join(map(str, other))}]",
+                       f"init_weights={out / 'checkpoints' / 'last.ckpt'}"))
+    tuned, tuned_config = load_lightnet(tmp_path / "checkpoints" / "last.ckpt")
+    assert tuple(tuned_config["light"]["strides"]) == other
+    assert tuple(m.stride[0] for m in tuned.extractor.modules() if isinstance(m, torch.nn.Conv2d)) == other
+    for a, b in zip(start.parameters(), tuned.parameters()):
+        torch.testing.assert_close(a, b, atol=1e-6, rtol=0)
+
+
+def test_the_strides_say_where_the_extractor_halves_the_resolution(tmp_path):
+    x, mask = torch.rand(2, 3, 3, 64, 64), torch.ones(2, 1, 64, 64)
+    sizes, flops = {}, {}
+    for strides in (LCNET_STRIDES, LATE_STRIDES):
+        net = LightNet(8, 16, strides)
+        second = net.extractor[:2](torch.rand(1, 4, 64, 64))
+        sizes[strides] = second.shape[-1]
+        with FlopCounterMode(display=False) as counter:
+            logits = net(x, mask)
+        flops[strides] = counter.get_total_flops()
+        assert logits["azimuth"].shape == (2, 3, bins.ANGLE_BINS)
+    assert sizes == {LCNET_STRIDES: 16, LATE_STRIDES: 32}
+    assert 1.7 < flops[LATE_STRIDES] / flops[LCNET_STRIDES] < 1.9
+    with pytest.raises(InputError, match=r"light.strides: seven, four of them 2 .* got \[2, 2, 2\]"):
+        LightNet(8, 16, (2, 2, 2))
+    with pytest.raises(InputError, match="light.strides"):          # as the command line reports it
+        train(train_config(tmp_path, "light.strides=[2,2,2]"))
+
+
+def test_weights_saved_before_the_strides_were_named_load_with_the_late_strides():
+    from unps.lightnet.system import build_net
+    config = {"light": {"_target_": "unps.lightnet.network.LightNet", "width": 8, "head_width": 16}}
+    net = build_net(config)
+    assert [m.stride[0] for m in net.extractor.modules() if isinstance(m, torch.nn.Conv2d)] == list(LATE_STRIDES)

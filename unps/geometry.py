@@ -12,6 +12,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import spsolve
 import torch
+import torch.nn.functional as F
 
 from unps.grid import Frame
 
@@ -111,6 +112,8 @@ def cast_shadows(depth: torch.Tensor, mask: torch.Tensor, lights: torch.Tensor, 
     From each object pixel, ``steps`` samples spaced evenly over the image's diagonal are taken
     along the light's image-plane direction (nearest pixel); the ray rises by l_z / |l_xy| per
     unit of distance, and the pixel is in shadow if the object stands above it at any sample.
+    Samples beyond the distance at which a light's ray has risen past the object's whole depth
+    range cannot be in shadow and are not taken (steep lights need a few of them).
 
     Args:
         depth: (H, W) float32 depth along +z, in units of which one pixel is ``pitch``.
@@ -124,19 +127,30 @@ def cast_shadows(depth: torch.Tensor, mask: torch.Tensor, lights: torch.Tensor, 
         (n, H, W) bool.
     """
     h, w = depth.shape
-    rows, cols = torch.nonzero(mask, as_tuple=True)
-    distance = torch.linspace(1, (h ** 2 + w ** 2) ** 0.5, steps)            # in pixels
-    surface = torch.where(mask, depth, torch.full_like(depth, -torch.inf)).flatten()
     out = torch.zeros(len(lights), h, w, dtype=torch.bool)
+    rows, cols = torch.nonzero(mask, as_tuple=True)
+    if not len(rows):
+        return out
+    distance = torch.linspace(1, (h ** 2 + w ** 2) ** 0.5, steps)            # in pixels
+    border = int(distance[-1]) + 2                  # off the image: a frame of −∞ around it
+    surface = F.pad(torch.where(mask, depth, -torch.inf), (border,) * 4, value=-torch.inf)
+    surface, width = surface.flatten(), w + 2 * border
+    start = depth[rows, cols]
+    span = float(start.max() - start.min())
+    planar = lights[:, :2].norm(dim=-1).clamp_min(1e-6)
+    rise = lights[:, 2] / planar                                              # per unit of distance
+    reach = torch.where(rise > 0, span / (pitch * rise.clamp_min(1e-12)), torch.inf)   # in pixels
+    order = torch.argsort(reach)                          # lights of like reach marched together
     for first in range(0, len(lights), chunk):
-        part = lights[first:first + chunk]
-        planar = part[:, :2].norm(dim=-1).clamp_min(1e-6)
-        step = torch.stack([-part[:, 1], part[:, 0]], -1) / planar[:, None]   # (row, col) per pixel
-        r = (rows[None, None] + distance[None, :, None] * step[:, 0, None, None]).round().int()
-        c = (cols[None, None] + distance[None, :, None] * step[:, 1, None, None]).round().int()
-        inside = (r >= 0) & (r < h) & (c >= 0) & (c < w)
-        flat = (r.clamp(0, h - 1) * w + c.clamp(0, w - 1))
-        ray = depth[rows, cols][None, None] + (distance * pitch)[None, :, None] * \
-            (part[:, 2] / planar)[:, None, None]
-        out[first:first + chunk, rows, cols] = (inside & (surface[flat] > ray + 1e-3)).any(1)
+        index = order[first:first + chunk]
+        taken = distance[distance <= reach[index].max()]
+        if not len(taken):
+            continue
+        part = lights[index]
+        step = torch.stack([-part[:, 1], part[:, 0]], -1) / planar[index, None]  # (row, col) per pixel
+        r = (rows[None, None] + taken[None, :, None] * step[:, 0, None, None]).round().int()
+        c = (cols[None, None] + taken[None, :, None] * step[:, 1, None, None]).round().int()
+        ray = start[None, None] + (taken * pitch)[None, :, None] * rise[index, None, None]
+        out[index[:, None], rows[None], cols[None]] = (
+            surface[(r + border) * width + c + border] > ray + 1e-3).any(1)
     return out

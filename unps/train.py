@@ -75,14 +75,21 @@ def resumed_config(saved: dict, cfg: DictConfig, overrides: Sequence[str]) -> Di
 
 def initial_weights(path: str, cfg: DictConfig):
     """The network of ``path`` to fine-tune, checked to be the one ``cfg.light`` describes."""
-    from unps.lightnet.system import load_lightnet
+    from unps.lightnet.system import load_lightnet, network_config
 
-    net, saved = load_lightnet(path)
+    saved_net, saved = load_lightnet(path)
+    have = network_config(saved)
     wanted = OmegaConf.to_container(cfg.light, resolve=True)
-    if saved["light"] != wanted:
-        raise InputError(f"{path}: its network {saved['light']} differs from light={wanted}; "
-                         f"fine-tuning needs the same architecture")
-    log.info("starting from the weights in %s", path)
+    if {**have, "strides": None} != {**wanted, "strides": None}:
+        raise InputError(f"{path}: its network {have} differs from light={wanted}; "
+                         f"fine-tuning needs the same layers")
+    net = instantiate(cfg.light, _partial_=True)()   # called here so errors reach the user
+    net.load_state_dict(saved_net.state_dict())
+    if list(have["strides"]) != list(wanted["strides"]):
+        log.info("starting from the weights in %s, trained with strides %s, now %s",
+                 path, list(have["strides"]), list(wanted["strides"]))
+    else:
+        log.info("starting from the weights in %s", path)
     return net.train()
 
 
@@ -121,7 +128,7 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
     torch.set_num_threads(cfg.recipe.threads or torch.get_num_threads())
     data = LightData(cfg.recipe, cfg.data, cfg.seed, start_step)
     data.setup("fit")   # errors in the data settings stop the run before the trainer starts
-    net = instantiate(cfg.light)
+    net = instantiate(cfg.light, _partial_=True)()   # called here so errors reach the user
     if cfg.init_weights and not cfg.ckpt_path:
         net = initial_weights(cfg.init_weights, cfg)
     system = LightEstimation(net, lr=cfg.recipe.lr,

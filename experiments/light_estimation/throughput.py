@@ -5,11 +5,14 @@
     python experiments/light_estimation/throughput.py --pipeline 27cc432   # whole runs, before and now
 
 Prints, for fixed pre-generated batches of the CPU recipe (64 px, 16 images, width 32), the
-training step (forward, backward, Adam) in samples per second for: contiguous tensors (as
-before), channels-last (as it is), bf16 autocast, ``torch.compile`` (inductor; its compile
-time apart), and larger batches; and the data generation in samples per second on one core,
-for the old data (blobs, cap of lights, perturbation) and the new (every shape family and
-light layout, the simulated camera).
+training step (forward, backward, Adam) in samples per second, with the floating-point operations
+one sample's forward and backward pass takes and the rate they run at against a large float32
+matrix product on the same threads, for: the extractor's late strides (``recipe=cpu``'s) on
+contiguous tensors (as trained before 2026-11-24) and channels-last (as it is), and LCNet's
+strides (``light=mimo``'s, the paper's); then, with the late strides, bf16 autocast,
+``torch.compile`` (inductor; its compile time apart) and larger batches; and the data
+generation in samples per second on one core, for the old data (blobs, cap of lights,
+perturbation) and the new (every shape family and light layout, the simulated camera).
 
 With ``--pipeline <rev>``, whole ``python -m unps.train`` runs instead (``--run-steps`` steps of
 the CPU recipe, no validation), from the code at ``<rev>`` with its data and from this checkout
@@ -32,6 +35,7 @@ from unittest import mock
 
 import torch
 import torch.nn.functional as F
+from torch.utils.flop_counter import FlopCounterMode
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "speed"))
 from compare import worktree  # noqa: E402
@@ -39,7 +43,7 @@ from stages import machine  # noqa: E402
 
 from unps.lightnet.bins import encode_lights
 from unps.lightnet import network
-from unps.lightnet.network import LightNet
+from unps.lightnet.network import LATE_STRIDES, LCNET_STRIDES, LightNet
 from unps.lightnet.rig import LAYOUTS, Camera
 from unps.lightnet.shapes import SHAPES
 from unps.lightnet.synthesis import LightDataset
@@ -74,6 +78,26 @@ def step_rate(net: torch.nn.Module, data: list[dict], autocast: bool = False) ->
     return sum(len(b["images"]) for b in data[1:]) / (time.perf_counter() - start)
 
 
+def flops_per_sample(net: torch.nn.Module, batch: dict) -> float:
+    """Floating-point operations of one training sample's forward and backward pass."""
+    with FlopCounterMode(display=False) as counter:
+        logits = net(batch["images"], batch["mask"])
+        sum(value.sum() for value in logits.values()).backward()
+    net.zero_grad()
+    return counter.get_total_flops() / len(batch["images"])
+
+
+def matmul_rate(size: int = 2048, repeats: int = 10) -> float:
+    """FLOP/s of a large float32 matrix product on this process's threads: what these cores
+    reach at best, the yardstick for the network's step."""
+    a, b = torch.rand(size, size), torch.rand(size, size)
+    a @ b
+    start = time.perf_counter()
+    for _ in range(repeats):
+        a @ b
+    return 2 * size ** 3 * repeats / (time.perf_counter() - start)
+
+
 def data_rate(dataset: LightDataset, count: int) -> float:
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
@@ -87,7 +111,8 @@ def data_rate(dataset: LightDataset, count: int) -> float:
 REPO = Path(__file__).resolve().parents[2]
 SETTINGS = {"recipe (no data worker, 2 threads)": [],
             "1 data worker, 2 threads": ["recipe.workers=1"],
-            "1 data worker, 1 thread": ["recipe.workers=1", "recipe.threads=1"]}
+            "1 data worker, 1 thread": ["recipe.workers=1", "recipe.threads=1"],
+            "LCNet's strides": ["light.strides=[2,2,1,2,1,2,1]"]}
 
 
 def run_rate(source: Path, steps: int, overrides: list[str]) -> float:
@@ -134,24 +159,33 @@ def main() -> None:
     print(f"data, one core: old {data_rate(old, 24):.1f} samples/s, new {data_rate(new, 24):.1f} samples/s")
     data = batches(old, args.batch[0], args.steps)
 
-    def fresh():
+    def fresh(strides=LATE_STRIDES):
         torch.manual_seed(0)
-        return LightNet(args.width, 64)
+        return LightNet(args.width, 64, strides)
+
+    peak = matmul_rate()
+
+    def measured(label: str, net: torch.nn.Module) -> None:
+        rate, flops = step_rate(net, data), flops_per_sample(net, data[0])
+        print(f"  {label:<31} {rate:7.1f} samples/s; {flops / 1e9:.2f} GFLOP per sample at "
+              f"{rate * flops / 1e9:.0f} GFLOP/s, {rate * flops / peak:.0%} of a 2048² float32 matrix "
+              f"product's {peak / 1e9:.0f} GFLOP/s")
 
     print(f"step, batch {args.batch[0]} ({args.resolution} px, {args.images} images, width {args.width}):")
     with mock.patch.object(network, "channels_last", lambda x: x):
-        print(f"  contiguous        {step_rate(fresh(), data):7.1f} samples/s (as trained before 2026-11-24)")
-    print(f"  channels-last     {step_rate(fresh(), data):7.1f} samples/s (as it is)")
-    print(f"  bf16 autocast     {step_rate(fresh(), data, autocast=True):7.1f} samples/s")
+        measured("late strides, contiguous", fresh())
+    measured("late strides, channels-last", fresh())
+    measured("LCNet's strides, channels-last", fresh(LCNET_STRIDES))
+    print(f"  bf16 autocast                   {step_rate(fresh(), data, autocast=True):7.1f} samples/s")
     compiled = torch.compile(fresh())
     start = time.perf_counter()
     step_rate(compiled, data[:2])
     compile_s = time.perf_counter() - start
     rate = step_rate(compiled, data)
-    print(f"  torch.compile     {rate:7.1f} samples/s (compiling took {compile_s:.0f} s)")
+    print(f"  torch.compile                   {rate:7.1f} samples/s (compiling took {compile_s:.0f} s)")
     for size in args.batch[1:]:
         rate = step_rate(fresh(), batches(old, size, max(3, args.steps * args.batch[0] // size)))
-        print(f"  batch {size:<11} {rate:7.1f} samples/s")
+        print(f"  batch {size:<25} {rate:7.1f} samples/s")
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from unps.errors import InputError
 from unps.lightnet.bins import ANGLE_BINS, INTENSITY_BINS
 
 
@@ -38,21 +39,33 @@ def normalise_stack(images: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     return images / mean.clamp_min(1e-8).view(-1, 1, 1, 1, 1)
 
 
+LCNET_STRIDES = (2, 2, 1, 2, 1, 2, 1)
+"""LCNet's extractor: it halves the resolution in its first two layers, then every other one."""
+LATE_STRIDES = (2, 1, 2, 1, 2, 1, 2)
+"""Halving in every other layer from the first: the same layers at twice LCNet's resolution
+from the second on, so 1.8× the operations (the light networks unps shipped until 2026-11-25)."""
+
+
 class LightNet(nn.Module):
     """Per-image light directions and intensities from a stack of images of one object.
 
     Args:
         width: channels of the first layer; the extractor is width·(1, 2, 2, 2, 2, 4, 4)
-            (64 gives the paper's 64-128-128-128-128-256-256) and halves the resolution four times.
+            (64 gives the paper's 64-128-128-128-128-256-256).
         head_width: hidden units of each classification head.
+        strides: of the extractor's seven layers; four 2s, so that it halves the resolution
+            four times (:data:`LCNET_STRIDES`, :data:`LATE_STRIDES`).
     """
 
-    def __init__(self, width: int = 64, head_width: int = 64):
+    def __init__(self, width: int = 64, head_width: int = 64,
+                 strides: tuple[int, ...] = LCNET_STRIDES):
         super().__init__()
+        if sorted(strides) != [1, 1, 1, 2, 2, 2, 2]:
+            raise InputError(f"light.strides: seven, four of them 2 and three 1, got {list(strides)}")
         c = width
-        self.extractor = nn.Sequential(conv(4, c, 2), conv(c, 2 * c, 1), conv(2 * c, 2 * c, 2),
-                                       conv(2 * c, 2 * c, 1), conv(2 * c, 2 * c, 2),
-                                       conv(2 * c, 4 * c, 1), conv(4 * c, 4 * c, 2))
+        channels = [4, c, 2 * c, 2 * c, 2 * c, 2 * c, 4 * c, 4 * c]
+        self.extractor = nn.Sequential(*(conv(cin, cout, stride) for cin, cout, stride in
+                                         zip(channels[:-1], channels[1:], strides)))
         self.classifier = nn.Sequential(conv(8 * c, 4 * c, 1), conv(4 * c, 4 * c, 2),
                                         conv(4 * c, 4 * c, 1))
         self.embed = nn.Sequential(nn.Linear(4 * c * 16, 4 * c), nn.LeakyReLU(0.1, inplace=True))

@@ -14,7 +14,7 @@ from omegaconf import OmegaConf
 from unps.errors import InputError
 from unps.lightnet.bins import decode_lights, encode_lights
 from unps.lightnet.materials import FAMILIES
-from unps.lightnet.network import LightNet
+from unps.lightnet.network import LATE_STRIDES, LightNet
 
 SHIPPED = Path(__file__).parent / "weights" / "lightnet.pt"
 
@@ -99,9 +99,15 @@ class LightEstimation(L.LightningModule):
         checkpoint["unps_config"] = self.config
 
 
+def network_config(config: dict) -> dict:
+    """A run config's ``light`` node, with the strides of the networks saved before the node
+    named them (:data:`LATE_STRIDES`)."""
+    return {"strides": list(LATE_STRIDES), **config["light"]}
+
+
 def build_net(config: dict) -> LightNet:
     """The network a run config describes (its ``light`` node)."""
-    return instantiate(OmegaConf.create(config)["light"])
+    return instantiate(OmegaConf.create(network_config(config)), _partial_=True)()
 
 
 def load_lightnet(path: str | os.PathLike | None = None) -> tuple[LightNet, dict]:
