@@ -73,8 +73,9 @@ def resumed_config(saved: dict, cfg: DictConfig, overrides: Sequence[str]) -> Di
     return resumed
 
 
-def initial_weights(path: str, cfg: DictConfig):
-    """The network of ``path`` to fine-tune, checked to be the one ``cfg.light`` describes."""
+def initial_weights(net, path: str, cfg: DictConfig):
+    """``net`` (the one ``cfg.light`` describes) with the weights of ``path`` to fine-tune, which
+    must have the same layers; the strides may differ."""
     from unps.lightnet.system import load_lightnet, network_config
 
     saved_net, saved = load_lightnet(path)
@@ -83,14 +84,13 @@ def initial_weights(path: str, cfg: DictConfig):
     if {**have, "strides": None} != {**wanted, "strides": None}:
         raise InputError(f"{path}: its network {have} differs from light={wanted}; "
                          f"fine-tuning needs the same layers")
-    net = instantiate(cfg.light, _partial_=True)()   # called here so errors reach the user
     net.load_state_dict(saved_net.state_dict())
     if list(have["strides"]) != list(wanted["strides"]):
         log.info("starting from the weights in %s, trained with strides %s, now %s",
                  path, list(have["strides"]), list(wanted["strides"]))
     else:
         log.info("starting from the weights in %s", path)
-    return net.train()
+    return net
 
 
 def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
@@ -130,7 +130,7 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
     data.setup("fit")   # errors in the data settings stop the run before the trainer starts
     net = instantiate(cfg.light, _partial_=True)()   # called here so errors reach the user
     if cfg.init_weights and not cfg.ckpt_path:
-        net = initial_weights(cfg.init_weights, cfg)
+        net = initial_weights(net, cfg.init_weights, cfg)
     system = LightEstimation(net, lr=cfg.recipe.lr,
                              lr_milestones=tuple(cfg.recipe.lr_milestones),
                              lr_gamma=cfg.recipe.lr_gamma, soft_decode=cfg.soft_decode,

@@ -43,7 +43,7 @@ LCNET_STRIDES = (2, 2, 1, 2, 1, 2, 1)
 """LCNet's extractor: it halves the resolution in its first two layers, then every other one."""
 LATE_STRIDES = (2, 1, 2, 1, 2, 1, 2)
 """Halving in every other layer from the first: the same layers at twice LCNet's resolution
-from the second on, so 1.8× the operations (the light networks unps shipped until 2026-11-25)."""
+from the second on, so 1.8× the operations (``recipe=cpu``'s, and the shipped weights')."""
 
 
 class LightNet(nn.Module):
