@@ -3,7 +3,13 @@ from pathlib import Path
 
 import pytest
 
-from unps.data.analytic import render_lambertian
+import numpy as np
+import torch
+
+from unps.data.analytic import dome_lights, height_field, render_lambertian
+from unps.data.subject import Subject
+from unps.geometry import cast_shadows
+from unps.lights.reversal import HALF_TURN
 
 SHARED_DATA = Path(os.environ.get("UNPS_SHARED_DATA",
                                   Path(__file__).resolve().parents[2] / "shared" / "data"))
@@ -39,3 +45,18 @@ def load_script(name, relative):
         else:
             sys.modules[name] = previous
     return module
+
+
+def rendered(concave: bool, size: int = 48, n_lights: int = 32) -> Subject:
+    """A hemisphere, or the bowl it leaves when pressed into a plane (depth and normals reversed),
+    Lambertian with attached and cast shadows."""
+    depth, normals, mask = height_field("sphere", size, seed=0)
+    if concave:
+        depth, normals = -depth, normals @ HALF_TURN.astype(np.float32)
+    lights = dome_lights(n_lights, seed=3)
+    visible = ~cast_shadows(torch.as_tensor(np.where(mask, depth, 0)), torch.as_tensor(mask),
+                            torch.as_tensor(lights), 1.0, 2 * size).numpy()
+    shading = np.maximum(np.einsum("hwc,nc->nhw", normals, lights), 0) * visible
+    images = np.repeat((0.7 * shading * mask)[..., None], 3, -1).astype(np.float32)
+    return Subject("bowl" if concave else "dome", images, mask, light_directions=lights,
+                   normals=normals)

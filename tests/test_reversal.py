@@ -2,30 +2,14 @@
 
 import numpy as np
 import pytest
-import torch
 
-from unps.data.analytic import dome_lights, height_field
+from conftest import rendered
+from unps.data.analytic import dome_lights
 from unps.data.subject import Subject
 from unps.errors import InputError
-from unps.geometry import cast_shadows
 from unps.lights import Lights, with_lights
 from unps.lights.reversal import HALF_TURN, ShadowEvidence, resolve_reversal, shadow_evidence
 from unps.solvers.rpca import robust_init
-
-
-def rendered(concave: bool, size: int = 48, n_lights: int = 32) -> Subject:
-    """A hemisphere, or the bowl it leaves when pressed into a plane (depth and normals reversed),
-    Lambertian with attached and cast shadows."""
-    depth, normals, mask = height_field("sphere", size, seed=0)
-    if concave:
-        depth, normals = -depth, normals @ HALF_TURN.astype(np.float32)
-    lights = dome_lights(n_lights, seed=3)
-    visible = ~cast_shadows(torch.as_tensor(np.where(mask, depth, 0)), torch.as_tensor(mask),
-                            torch.as_tensor(lights), 1.0, 2 * size).numpy()
-    shading = np.maximum(np.einsum("hwc,nc->nhw", normals, lights), 0) * visible
-    images = np.repeat((0.7 * shading * mask)[..., None], 3, -1).astype(np.float32)
-    return Subject("bowl" if concave else "dome", images, mask, light_directions=lights,
-                   normals=normals)
 
 
 def turned(subject: Subject) -> Lights:

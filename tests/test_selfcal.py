@@ -5,11 +5,12 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
+from conftest import rendered
 from unps.data.subject import Subject
 from unps.errors import InputError
 from unps.lights import Lights, light_errors
 from unps.lights.factorization import aligned_factorization
-from unps.lights.model import DepthPyramid, normals_from_depth
+from unps.lights.model import DepthPyramid, SelfCalibrationModel, normals_from_depth
 from unps.lights.selfcal import SelfCalibration, self_calibrate
 from unps.metrics import angular_error
 
@@ -91,6 +92,30 @@ def test_self_calibration_undoes_a_15_degree_rotation_of_the_lights(glossy):
     assert np.exp(np.log(found.intensities.mean(1)).mean()) == pytest.approx(1, abs=1e-5)
 
 
+def test_the_model_renders_the_shadows_its_depth_casts():
+    columns = np.tile(np.arange(24), (24, 1))
+    wall = torch.as_tensor(np.where(columns < 6, 8.0, 0.0), dtype=torch.float32)   # a step 8 px down
+    mask = torch.ones(24, 24, dtype=torch.bool)
+    lights = torch.tensor([[-0.8, 0.0, 0.6], [0.0, 0.0, 1.0]])             # grazing from the left; overhead
+    model = SelfCalibrationModel(lights, wall, mask, torch.full((24 * 24, 3), 0.5), (10.0,), levels=1)
+    visible = model.visibility()
+    hidden = visible[:, 0].reshape(24, 24) == 0
+    assert hidden[:, 6:15].all() and not hidden[:, :6].any() and not hidden[:, 17:].any()   # 8 / 0.75 px
+    assert visible[:, 1].all()
+    shadowed, unshadowed = (x[:, 0, 0].reshape(24, 24) for x in (model(visible), model()))
+    torch.testing.assert_close(shadowed[~hidden], unshadowed[~hidden])
+    assert (shadowed[:, 7:15] == 0).all() and (unshadowed[:, 7:15] > 0.2).all()   # the lit floor
+
+
+def test_self_calibration_of_a_bowl_holds_once_its_cast_shadows_are_rendered():
+    bowl = rendered(concave=True)
+    start = rotated(bowl, 10)
+    errors = {every: light_errors(self_calibrate(bowl, start, SelfCalibration(
+        steps=600, reference_steps=100, max_pixels=1200, shadows_every=every)), bowl)["light_dir_mae"]
+        for every in (0, 100)}
+    assert errors[100] < 3.0 and errors[0] > 4.5, errors
+
+
 def test_self_calibration_is_deterministic(glossy):
     settings = SelfCalibration(steps=60, reference_steps=20, max_pixels=600)
     first, second = (self_calibrate(glossy, rotated(glossy, 10), settings) for _ in range(2))
@@ -111,6 +136,8 @@ def test_self_calibration_refuses_stacks_it_cannot_use(glossy):
     dark = glossy.replace(images=np.zeros_like(glossy.images))
     with pytest.raises(InputError, match="black"):
         self_calibrate(dark, rotated(dark, 5), QUICK)
+    with pytest.raises(InputError, match="shadows_every"):
+        self_calibrate(glossy, rotated(glossy, 5), SelfCalibration(shadows_every=-1))
 
 
 def test_light_selfcal_in_a_fit_logs_each_stage_and_draws_the_lights(tmp_path, caplog):

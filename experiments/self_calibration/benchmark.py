@@ -3,6 +3,7 @@
     python experiments/self_calibration/benchmark.py                 # everything (~25 min, 2 cores)
     python experiments/self_calibration/benchmark.py --subjects ball cat pot1 --no-perturbation
     python experiments/self_calibration/benchmark.py --one-pass --align contour   # the earlier defaults
+    python experiments/self_calibration/benchmark.py --shadows-every 0            # no cast shadows
 
 1. Per subject (DiLiGenT ball, cat, pot1 read as made, all 96 images; unps's rendered subjects,
    rendered and cached on first use): light direction MAE of the network (averaged over the eight
@@ -135,11 +136,13 @@ def main():
                         help="the network run once, not averaged over the symmetries (light.symmetric=false)")
     parser.add_argument("--align", choices=("contour", "none"), default="none",
                         help="as light.align (none: null)")
+    parser.add_argument("--shadows-every", type=int, default=SelfCalibration.shadows_every,
+                        help="as light.selfcal.shadows_every (0: no cast shadows, as before 2026-11-25)")
     parser.add_argument("--verbose", action="store_true", help="the self-calibration's progress")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(name)s: %(message)s")
-    settings = SelfCalibration()
+    settings = SelfCalibration(shadows_every=args.shadows_every)
     compare(args.subjects, args.data, settings, not args.one_pass, args.align == "contour")
     if not args.no_perturbation:
         perturbation(args.perturb, args.data, settings, args.seed)

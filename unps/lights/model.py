@@ -2,9 +2,11 @@
 
 Every pixel p of the working grid under image i is rendered as
 
-    X̃_ip = e_i · max(n_p·l_i, 0) · (ρ_p + Σ_k w_k · exp(κ_k (n_p·h_i − 1)))
+    X̃_ip = V_ip · e_i · max(n_p·l_i, 0) · (ρ_p + Σ_k w_k · exp(κ_k (n_p·h_i − 1)))
 
-with n_p the normal of a depth map (so the normals are integrable), ρ_p an RGB diffuse albedo,
+with V_ip 0 where the depth map casts a shadow on p from light i and 1 elsewhere
+(:meth:`SelfCalibrationModel.visibility`), n_p the normal of a depth map (so the normals are
+integrable), ρ_p an RGB diffuse albedo,
 w_k ≥ 0 the weights of K spherical-Gaussian specular lobes of fixed sharpness κ_k shared by the
 whole object, h_i the half vector between l_i and the view v = (0, 0, 1) (orthographic), and
 (l_i, e_i) the direction and intensity of light i.
@@ -22,9 +24,13 @@ Frame: x right (+col), y up (−row), z toward the camera; depth in pixels of th
 
 from __future__ import annotations
 
+import math
+
 import torch
 import torch.nn.functional as F
 from torch import nn
+
+from unps.geometry import cast_shadows
 
 VIEW = (0.0, 0.0, 1.0)
 MIN_EXPONENT = -60.0   # lobes below e⁻⁶⁰ are cut: float32 denormals would make the CPU crawl
@@ -131,8 +137,18 @@ class SelfCalibrationModel(nn.Module):
         """(K,) the lobes' weights w_k ≥ 0."""
         return F.softplus(self.lobe_logits)
 
-    def forward(self) -> torch.Tensor:
-        """(m, n, 3) the rendered images at the object pixels."""
+    @torch.no_grad()
+    def visibility(self) -> torch.Tensor:
+        """(m, n) V: 0 where the current depth hides pixel p from the current light i (marched
+        one sample per pixel of the grid's diagonal, :func:`unps.geometry.cast_shadows`), else 1."""
+        directions, _ = self.lights()
+        steps = math.ceil(math.hypot(*self.mask.shape))
+        hidden = cast_shadows(self.depth().float(), self.mask, directions.float(), 1.0, steps)
+        return (~hidden[:, self.mask]).T.float().contiguous()
+
+    def forward(self, visible: torch.Tensor | None = None) -> torch.Tensor:
+        """(m, n, 3) the rendered images at the object pixels, cast shadows where ``visible``
+        (m, n) is 0 (None: every light reaches every pixel)."""
         directions, intensities = self.lights()
         normals = self.normals()
         shading = (normals @ directions.T).clamp_min(0)                                    # (m, n)
@@ -141,4 +157,6 @@ class SelfCalibrationModel(nn.Module):
         exponent = (self.sharpness[:, None, None] * (cosine - 1)).clamp_min(MIN_EXPONENT)
         specular = torch.einsum("k,kmn->mn", self.lobes(), torch.exp(exponent))
         radiance = self.log_albedo.exp()[:, None, :] + specular[..., None]
+        if visible is not None:
+            shading = shading * visible
         return (intensities[None, :, None] * shading[..., None]) * radiance

@@ -11,7 +11,9 @@ enough for a CPU:
    first guess (:func:`unps.lights.factorization.aligned_factorization`);
 2. on a working grid of at most ``max_pixels`` object pixels, the depth integrated from those
    normals, the albedo, lobes, one 3×3 frame and small per-light residuals are fitted with Adam
-   under an L1 loss, which lets cast shadows and saturated pixels go rather than drag the fit;
+   under an L1 loss, which lets saturated pixels and interreflections go rather than drag the
+   fit; the shadows that the current depth casts from the current lights are rendered, and
+   marched again every ``shadows_every`` steps;
 3. a shorter fit of the same model with the lights held where step 1 put them gives the loss
    the first guess can reach; a fit that ends above it, or diverges, returns the first guess
    with a warning.
@@ -57,6 +59,8 @@ class SelfCalibration:
         lr_lights: learning rate of the light frame and per-light residuals.
         residual_weight: weight of the mean squared per-light residual |ε_i|².
         gbr_weight: weight of the pull of the bas-relief parameters (μ, ν, λ) toward (0, 0, 1).
+        shadows_every: steps between updates of the cast shadows (which pixels the current depth
+            hides from each current light); 0 renders none.
         log_every: steps between progress lines.
     """
 
@@ -69,6 +73,7 @@ class SelfCalibration:
     lr_lights: float = 0.003
     residual_weight: float = 0.1
     gbr_weight: float = 0.003
+    shadows_every: int = 100
     log_every: int = 500
 
 
@@ -88,6 +93,9 @@ def self_calibrate(subject: Subject, lights: Lights,
         intensities times one fitted scale per image; geometric mean of the scales 1), or
         ``lights`` itself when the fit does not explain the images better.
     """
+    if settings.shadows_every < 0:
+        raise InputError(f"light.selfcal.shadows_every must be a whole number of steps >= 0 (0: no "
+                         f"cast shadows), got {settings.shadows_every}")
     if subject.n_images < MIN_IMAGES:
         raise InputError(f"self-calibration needs at least {MIN_IMAGES} images, "
                          f"{subject.name!r} has {subject.n_images}: use light=estimated (the "
@@ -156,23 +164,28 @@ def initial_model(grid: Subject, target: torch.Tensor, scaled_lights: np.ndarray
                                 uniform, tuple(settings.sharpness), settings.levels)
 
 
-def objective(model: SelfCalibrationModel, target: torch.Tensor,
-              settings: SelfCalibration) -> torch.Tensor:
-    """Mean absolute image error plus the pulls on the per-light residuals and the bas-relief."""
+def objective(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibration,
+              visible: torch.Tensor | None = None) -> torch.Tensor:
+    """Mean absolute image error (cast shadows where ``visible`` (m, n) is 0) plus the pulls on
+    the per-light residuals and the bas-relief."""
     mu, nu, lam = model.gbr
-    return ((model() - target).abs().mean()
+    return ((model(visible) - target).abs().mean()
             + settings.residual_weight * model.light_residual.pow(2).sum(1).mean()
             + settings.gbr_weight * (mu ** 2 + nu ** 2 + (lam - 1) ** 2))
 
 
 def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibration,
         steps: int, lights_free: bool = True) -> float:
-    """Adam on the model's unknowns (the lights' only when ``lights_free``); stops early on a
-    non-finite loss.
+    """Adam on the model's unknowns (the lights' only when ``lights_free``), the cast shadows
+    marched again every ``settings.shadows_every`` steps; stops early on a non-finite loss.
 
     Returns:
-        The objective at the end.
+        The objective at the end, with the shadows of the final depth and lights.
     """
+    def shadows() -> torch.Tensor | None:
+        return model.visibility() if settings.shadows_every else None
+
+    visible = None
     light_parameters = [model.columns, model.gbr, model.light_residual]
     surface_parameters = [model.log_albedo, model.lobe_logits, *model.depth.parameters()]
     groups = [dict(params=surface_parameters, lr=settings.lr)]
@@ -180,7 +193,9 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
         groups.append(dict(params=light_parameters, lr=settings.lr_lights))
     optimiser = torch.optim.Adam(groups)
     for step in range(steps):
-        loss = objective(model, target, settings)
+        if settings.shadows_every and step % settings.shadows_every == 0:
+            visible = shadows()
+        loss = objective(model, target, settings, visible)
         if not torch.isfinite(loss):
             return loss.item()
         if lights_free and step % settings.log_every == 0:
@@ -189,4 +204,4 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
         loss.backward()
         optimiser.step()
     with torch.no_grad():
-        return objective(model, target, settings).item()
+        return objective(model, target, settings, shadows()).item()
