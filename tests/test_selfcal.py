@@ -136,8 +136,9 @@ def test_self_calibration_refuses_stacks_it_cannot_use(glossy):
     dark = glossy.replace(images=np.zeros_like(glossy.images))
     with pytest.raises(InputError, match="black"):
         self_calibrate(dark, rotated(dark, 5), QUICK)
-    with pytest.raises(InputError, match="shadows_every"):
-        self_calibrate(glossy, rotated(glossy, 5), SelfCalibration(shadows_every=-1))
+    for every in (-1, 2.5):
+        with pytest.raises(InputError, match=f"shadows_every must be a whole number .*got {every}"):
+            self_calibrate(glossy, rotated(glossy, 5), SelfCalibration(shadows_every=every))
 
 
 def test_light_selfcal_in_a_fit_logs_each_stage_and_draws_the_lights(tmp_path, caplog):

@@ -93,7 +93,7 @@ def self_calibrate(subject: Subject, lights: Lights,
         intensities times one fitted scale per image; geometric mean of the scales 1), or
         ``lights`` itself when the fit does not explain the images better.
     """
-    if settings.shadows_every < 0:
+    if settings.shadows_every < 0 or int(settings.shadows_every) != settings.shadows_every:
         raise InputError(f"light.selfcal.shadows_every must be a whole number of steps >= 0 (0: no "
                          f"cast shadows), got {settings.shadows_every}")
     if subject.n_images < MIN_IMAGES:
@@ -182,9 +182,7 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
     Returns:
         The objective at the end, with the shadows of the final depth and lights.
     """
-    def shadows() -> torch.Tensor | None:
-        return model.visibility() if settings.shadows_every else None
-
+    every = settings.shadows_every
     visible = None
     light_parameters = [model.columns, model.gbr, model.light_residual]
     surface_parameters = [model.log_albedo, model.lobe_logits, *model.depth.parameters()]
@@ -193,8 +191,8 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
         groups.append(dict(params=light_parameters, lr=settings.lr_lights))
     optimiser = torch.optim.Adam(groups)
     for step in range(steps):
-        if settings.shadows_every and step % settings.shadows_every == 0:
-            visible = shadows()
+        if every and step % every == 0:
+            visible = model.visibility()
         loss = objective(model, target, settings, visible)
         if not torch.isfinite(loss):
             return loss.item()
@@ -204,4 +202,4 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
         loss.backward()
         optimiser.step()
     with torch.no_grad():
-        return objective(model, target, settings, shadows()).item()
+        return objective(model, target, settings, model.visibility() if every else None).item()
