@@ -318,6 +318,48 @@ def test_network_input_crops_to_the_object_and_keeps_its_shape():
     assert 0.4 < m.mean() < 0.6                             # a 20×10 box in its 20×20 square
 
 
+def test_network_input_frames_the_object_to_the_share_asked():
+    images = np.zeros((1, 50, 70, 3), np.float32)
+    mask = np.zeros((50, 70), bool)
+    mask[5:25, 30:50] = True                                # a 20×20 box, off-centre
+    images[:, mask] = 1
+    full, m_full = network_input(images, mask, 64)
+    half, m_half = network_input(images, mask, 64, fill=0.5)
+    # the box's side is 20 of 21 px at fill 1 and 20 of 42 at fill 0.5
+    assert m_full.mean() == pytest.approx((20 / 21) ** 2, abs=0.03)
+    assert m_half.mean() == pytest.approx((20 / 42) ** 2, abs=0.03)
+    rows, cols = torch.nonzero(m_half[0, 0], as_tuple=True)
+    assert rows.float().mean() == pytest.approx(31.5, abs=2) and cols.float().mean() == pytest.approx(31.5, abs=2)
+    torch.testing.assert_close(half[0, 0, 0], m_half[0, 0], atol=0.5, rtol=0)  # the images framed alike
+
+
+@pytest.mark.parametrize("framings", [[], [1.0, 1.5], [0.0], [-0.5], "abc", ["x"], None])
+def test_estimate_lights_refuses_framings_outside_the_unit_interval(framings):
+    from unps.data.analytic import render_lambertian
+    with pytest.raises(InputError, match="light.framings"):
+        estimate_lights(render_lambertian(size=16, n_lights=4), framings=framings)
+
+
+def test_several_framings_are_averaged_and_report_their_spread(sphere):
+    one = estimate_lights(sphere, symmetric=False, framings=[1.0], reversal=None)
+    three = estimate_lights(sphere, symmetric=False, framings=[1.0, 0.85, 0.7], reversal=None)
+    assert one.spread_deg is None
+    assert three.spread_deg.shape == (sphere.n_images,) and (three.spread_deg > 0).all()
+    np.testing.assert_allclose(np.linalg.norm(three.directions, axis=1), 1, atol=1e-5)
+    np.testing.assert_allclose(three.intensities.mean(), 1, atol=1e-5)
+    assert not np.allclose(one.directions, three.directions)
+
+
+def test_light_estimated_configures_what_estimate_lights_does_by_default():
+    import inspect
+    with initialize_config_module(config_module="unps.conf", version_base="1.3"):
+        light = compose("fit", overrides=["light=estimated"]).light
+    defaults = inspect.signature(estimate_lights).parameters
+    for key in ("soft_decode", "symmetric", "reversal", "align"):
+        assert light[key] == defaults[key].default, key
+    assert list(light.framings) == list(defaults["framings"].default)
+
+
 def test_missing_or_foreign_weights_are_reported(tmp_path):
     with pytest.raises(InputError, match="weights not found"):
         load_lightnet(tmp_path / "none.pt")

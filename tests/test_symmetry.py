@@ -43,8 +43,16 @@ def test_mean_direction_and_spread():
 
 def test_the_default_estimate_is_symmetric_and_reports_its_spread_one_pass_does_not(sphere):
     symmetric = estimate_lights(sphere)
-    one_pass = estimate_lights(sphere, symmetric=False)
+    one_pass = estimate_lights(sphere, symmetric=False, framings=[1.0])
     assert symmetric.spread_deg.shape == (sphere.n_images,) and (symmetric.spread_deg >= 0).all()
     assert one_pass.spread_deg is None
     np.testing.assert_allclose(np.linalg.norm(symmetric.directions, axis=1), 1, atol=1e-5)
     np.testing.assert_allclose(symmetric.intensities.mean(), 1, atol=1e-5)
+
+
+def test_the_default_passes_show_each_symmetry_once_and_each_framing_mirrored_and_not():
+    from unps.lightnet.estimate import FRAMINGS, paired
+    passes = paired(FRAMINGS, SYMMETRIES)
+    assert len(passes) == 8 and sorted(frame for _, frame in passes) == sorted(SYMMETRIES)
+    for fill in FRAMINGS:
+        assert sorted(mirror for f, (_, mirror) in passes if f == fill) == [False, True]

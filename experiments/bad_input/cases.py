@@ -130,6 +130,9 @@ CASES = [
     Case("unknown light alignment", "`light=estimated light.align=boundary`",
          lambda root: ["subject=lambertian", "light=estimated", "light.align=boundary", *WOODHAM], 2,
          "light.align"),
+    Case("framing outside (0, 1]", "`light=estimated light.framings=[1.0,1.5]`",
+         lambda root: ["subject=lambertian", "light=estimated", "light.framings=[1.0,1.5]", *WOODHAM], 2,
+         "light.framings"),
     # -- files --------------------------------------------------------------------------------
     Case("root not a folder", "`subject.root` that does not exist",
          lambda root: folder_args(root / "nowhere", *WOODHAM), 2, "nowhere: not a folder"),

@@ -4,21 +4,25 @@
     python experiments/light_estimation/benchmark.py --only diligent --renders Face Tablet1 Vase
 
 1. DiLiGenT (ball 16-bit, cat and pot1 crops, all 96 images): direction MAE of the lights as
-   the network gives them in one pass (the default) and averaged over the eight symmetries of
-   the square (``light.symmetric=true``), the median spread of those eight estimates, the
-   scale-invariant intensity error (one pass), the direction MAE after the cast-shadow reversal
-   test (``light.reversal=shadows``) and then also aligned to the occluding contour
-   (``light.align=contour``; both the defaults of ``light=estimated``), and the
-   normal MAE of the robust initialisation with the network's, the aligned and the
-   ground-truth lights.
-   Then the one-pass direction MAE on random subsets of 16, 12 and 8 of the 96 images (sparse
+   the network gives them in one pass, averaged over the eight symmetries of the square
+   (``light.symmetric=true light.framings=[1.0]``) and as ``light=estimated`` averages them by
+   default (its ``symmetric`` and ``framings``); of the default, the median spread of its
+   passes, its scale-invariant intensity error, its direction MAE after the cast-shadow reversal
+   test (``light.reversal=shadows``, the default) and then also aligned to the occluding contour
+   (``light.align=contour``), and the normal MAE of the robust initialisation with those lights,
+   the aligned ones and the ground-truth ones.
+   Then the default's direction MAE on random subsets of 16, 12 and 8 of the 96 images (sparse
    rigs). With ``--renders Face Tablet1 …``, the same directions for unps's own rendered subjects.
 2. Held-out synthetic stacks (seeds never used in training) of the checkpoint's own recipe, per
    BRDF family: analytic and measured-span lobes always, MERL neural fits when
    ``<data>/merl_nbrdf`` exists, MERL tables with ``--merl-dir``; and per shape family (blob,
    vessel, relief, sculpture), seen through the simulated camera under every light layout; each
    row also after the cast-shadow reversal test.
-3. Speed of the checkpoint's recipe on this machine: generating one batch (one core, as the
+3. Framings (``light.framings``): held-out stacks per shape family rendered at twice the network's
+   resolution and framed as ``light=estimated`` frames a capture (cropped to the object, then
+   area-resized), the direction MAE of one pass, of the eight symmetries, of the default's eight
+   passes (symmetries and framings in turn) and of all 32 pairs of symmetry and framing.
+4. Speed of the checkpoint's recipe on this machine: generating one batch (one core, as the
    training's data worker) against one training step.
 """
 
@@ -37,10 +41,11 @@ from unps.data.subject import Subject
 from unps.errors import InputError
 from unps.lights import Lights, light_errors, with_lights
 from unps.lightnet.bins import decode_lights, encode_lights
-from unps.lightnet.estimate import estimate_lights
+from unps.lightnet.estimate import FRAMINGS, estimate_lights, network_input, network_pass, paired
 from unps.lightnet.materials import MaterialBank
 from unps.lightnet.rig import LAYOUTS, Camera
 from unps.lightnet.shapes import SHAPES
+from unps.lightnet.symmetry import SYMMETRIES, mean_direction
 from unps.lightnet.synthesis import LightDataset
 from unps.lightnet.system import SHIPPED, batch_light_errors, build_net, load_lightnet
 from unps.metrics import light_direction_mae, normal_metrics
@@ -54,26 +59,25 @@ OBJECTS = ("ball", "cat", "pot1")
 
 def diligent(data: Path, checkpoint, quantization: str = "auto"):
     """``quantization``: ``auto`` reads the 8-bit crops as ``floor``, the way they were made."""
-    print("DiLiGenT, all 96 images   1-pass dir MAE   8-sym dir MAE   spread   int err   reversal-tested   "
-          "aligned dir MAE   RPCA(est) °  RPCA(aligned) °  RPCA(GT) °")
+    print("DiLiGenT, all 96 images   1-pass dir MAE   8-sym dir MAE   default dir MAE   spread   int err   "
+          "reversal-tested   aligned dir MAE   RPCA(est) °  RPCA(aligned) °  RPCA(GT) °")
     for name in OBJECTS:
         try:
             subject = read_diligent_object(data / "DiLiGenT", name, quantization=quantization)
         except InputError as e:
             print(f"{name:<6} skipped: {e}")
             continue
-        lights = estimate_lights(subject, checkpoint, symmetric=False, reversal=None, align=None)
-        averaged = estimate_lights(subject, checkpoint, symmetric=True, reversal=None, align=None)
+        one_pass, averaged, lights = passes(subject, checkpoint)
         tested, normals = resolve_reversal(subject, lights)
         aligned = align_to_contour(subject, tested, normals)
         errors = light_errors(lights, subject)
-        est = robust_init(with_lights(subject, lights), lights.directions)
+        est = robust_init(with_lights(subject, tested), tested.directions)
         est_aligned = robust_init(with_lights(subject, aligned), aligned.directions)
         gt = robust_init(subject, subject.light_directions)
         mae = lambda e: normal_metrics(e.normals, subject.normals, subject.mask)["normal_mae"]  # noqa: E731
-        print(f"{name:<25} {errors['light_dir_mae']:>15.2f}° "
-              f"{light_errors(averaged, subject)['light_dir_mae']:>10.2f}° "
-              f"{np.median(averaged.spread_deg):>7.1f}° "
+        print(f"{name:<25} {light_errors(one_pass, subject)['light_dir_mae']:>15.2f}° "
+              f"{light_errors(averaged, subject)['light_dir_mae']:>14.2f}° "
+              f"{errors['light_dir_mae']:>16.2f}° {np.median(lights.spread_deg):>7.1f}° "
               f"{errors['light_int_err']:>9.3f} "
               f"{light_errors(tested, subject)['light_dir_mae']:>16.2f}° "
               f"{light_errors(aligned, subject)['light_dir_mae']:>16.2f}° {mae(est):>12.2f} "
@@ -81,8 +85,16 @@ def diligent(data: Path, checkpoint, quantization: str = "auto"):
 
 
 
+def passes(subject: Subject, checkpoint) -> tuple[Lights, Lights, Lights]:
+    """The network's lights in one pass, averaged over the eight symmetries, and averaged as
+    ``light=estimated`` does by default; none reversal-tested or aligned."""
+    network = lambda **how: estimate_lights(subject, checkpoint, reversal=None, align=None, **how)  # noqa: E731
+    return (network(symmetric=False, framings=[1.0]), network(symmetric=True, framings=[1.0]),
+            network())
+
+
 def sparse(data: Path, checkpoint, counts=(16, 12, 8), draws: int = 5):
-    """One-pass direction MAE on random subsets of DiLiGenT's 96 images (mean ± sd over draws):
+    """Direction MAE of the default estimate on random subsets of DiLiGenT's 96 images (mean ± sd over draws):
     sparse light sets like small rigs', the network seeing only those images."""
     print(f"DiLiGenT, random subsets ({draws} draws each)   " +
           "   ".join(f"{count:>2} images" for count in counts))
@@ -98,7 +110,7 @@ def sparse(data: Path, checkpoint, counts=(16, 12, 8), draws: int = 5):
             errors = []
             for _ in range(draws):
                 subset = subject.select(np.sort(rng.choice(subject.n_images, count, replace=False)))
-                lights = estimate_lights(subset, checkpoint, symmetric=False, reversal=None, align=None)
+                lights = estimate_lights(subset, checkpoint, reversal=None, align=None)
                 errors.append(light_errors(lights, subset)["light_dir_mae"])
             cells.append(f"{np.mean(errors):5.2f} ± {np.std(errors):4.2f}°")
         print(f"{name:<42} " + "   ".join(cells), flush=True)
@@ -108,18 +120,18 @@ def renders(names: list[str], checkpoint):
     from hydra import compose, initialize_config_module
     from hydra.utils import instantiate
 
-    print("rendered subject          1-pass dir MAE   8-sym dir MAE   spread   reversal-tested   "
-          "aligned dir MAE")
+    print("rendered subject          1-pass dir MAE   8-sym dir MAE   default dir MAE   spread   "
+          "reversal-tested   aligned dir MAE")
     with initialize_config_module("unps.conf", version_base=None):
         for name in names:
             subject = instantiate(compose("fit", overrides=[f"subject={name}"]).subject, _partial_=True)()
-            lights = estimate_lights(subject, checkpoint, symmetric=False, reversal=None, align=None)
-            averaged = estimate_lights(subject, checkpoint, symmetric=True, reversal=None, align=None)
+            one_pass, averaged, lights = passes(subject, checkpoint)
             tested, normals = resolve_reversal(subject, lights)
             aligned = align_to_contour(subject, tested, normals)
-            print(f"{name:<25} {light_errors(lights, subject)['light_dir_mae']:>15.2f}° "
-                  f"{light_errors(averaged, subject)['light_dir_mae']:>10.2f}° "
-                  f"{np.median(averaged.spread_deg):>7.1f}° "
+            print(f"{name:<25} {light_errors(one_pass, subject)['light_dir_mae']:>15.2f}° "
+                  f"{light_errors(averaged, subject)['light_dir_mae']:>14.2f}° "
+                  f"{light_errors(lights, subject)['light_dir_mae']:>16.2f}° "
+                  f"{np.median(lights.spread_deg):>7.1f}° "
                   f"{light_errors(tested, subject)['light_dir_mae']:>16.2f}° "
                   f"{light_errors(aligned, subject)['light_dir_mae']:>16.2f}°", flush=True)
 
@@ -158,6 +170,37 @@ def score(net, ds: LightDataset, label: str) -> None:
           f"{np.mean(tested):>16.2f}°", flush=True)
 
 
+@torch.no_grad()
+def framed(net, config, samples: int) -> None:
+    """Part 3: every pair of symmetry and framing once per stack, then each way of averaging them."""
+    recipe = config["recipe"]
+    resolution = recipe["resolution"]
+    pairs = [(fill, frame) for fill in FRAMINGS for frame in SYMMETRIES]
+    schemes = {"1 pass": [(1.0, SYMMETRIES[0])], "8 symmetries": [(1.0, f) for f in SYMMETRIES],
+               "default (8 passes)": paired(FRAMINGS, SYMMETRIES), "all 32 pairs": pairs}
+    print(f"framed held-out stacks (rendered at {2 * resolution} px, {recipe['images']} images, "
+          f"{samples} per family; framings {', '.join(f'{f:g}' for f in FRAMINGS)})\n{'dir MAE':<40}" +
+          "".join(f"{name:>20}" for name in schemes))
+    totals = {name: [] for name in schemes}
+    for shape in SHAPES:
+        ds = LightDataset(samples, resolution=2 * resolution, images=recipe["images"], seed=987_654,
+                          shape=shape, layouts=dict.fromkeys(LAYOUTS, 1.0), camera=Camera())
+        errors = {name: [] for name in schemes}
+        for item in map(ds.__getitem__, range(len(ds))):
+            images, mask = item["images"].permute(0, 2, 3, 1).numpy(), item["mask"][0].numpy() > 0.5
+            inputs = {fill: network_input(images, mask, resolution, fill) for fill in FRAMINGS}
+            estimates = {(fill, frame): network_pass(net, *inputs[fill], *frame)[0] for fill, frame in pairs}
+            for name, chosen in schemes.items():
+                mean = mean_direction(torch.stack([estimates[p] for p in chosen]))[0]
+                errors[name].append(light_direction_mae(mean.numpy(), item["directions"].numpy()))
+        for name, values in errors.items():
+            totals[name].append(np.mean(values))
+        print(f"shape {shape:<34}" + "".join(f"{np.mean(v):>19.2f}°" for v in errors.values()), flush=True)
+    print(f"{'mean over the families but relief':<40}" +
+          "".join(f"{np.mean([v for s, v in zip(SHAPES, t) if s != 'relief']):>19.2f}°"
+                  for t in totals.values()))
+
+
 def speed(config, steps: int = 10):
     recipe = config["recipe"]
     ds = LightDataset(steps * recipe["batch_size"], resolution=recipe["resolution"],
@@ -193,7 +236,10 @@ def main():
     parser.add_argument("--samples", type=int, default=64)
     parser.add_argument("--quantization", choices=["auto", "round"], default="auto",
                         help="how to read DiLiGenT (round: the crops as read before unps read them as made)")
-    parser.add_argument("--only", choices=["diligent", "synthetic", "speed"], help="one part only")
+    parser.add_argument("--only", choices=["diligent", "synthetic", "framings", "speed"],
+                        help="one part only")
+    parser.add_argument("--framed-samples", type=int, default=32,
+                        help="stacks per family in part 3 (32 passes each)")
     parser.add_argument("--renders", nargs="*", default=[], metavar="SUBJECT",
                         help="rendered subjects to add to the DiLiGenT part, e.g. Face Tablet1")
     args = parser.parse_args()
@@ -210,6 +256,8 @@ def main():
         renders(args.renders, args.checkpoint)
     if args.only in (None, "synthetic"):
         synthetic(net, config, families(args.data, args.merl_dir), args.samples)
+    if args.only in (None, "framings"):
+        framed(net, config, args.framed_samples)
     if args.only in (None, "speed"):
         speed(config)
 

@@ -2,12 +2,13 @@
 
     python experiments/self_calibration/benchmark.py                 # everything (~25 min, 2 cores)
     python experiments/self_calibration/benchmark.py --subjects ball cat pot1 --no-perturbation
-    python experiments/self_calibration/benchmark.py --one-pass --align contour   # the earlier defaults
+    python experiments/self_calibration/benchmark.py --one-pass --framings 1 --align contour  # before 11-24
     python experiments/self_calibration/benchmark.py --shadows-every 0            # no cast shadows
 
 1. Per subject (DiLiGenT ball, cat, pot1 read as made, all 96 images; unps's rendered subjects,
    rendered and cached on first use): light direction MAE of the network (averaged over the eight
-   symmetries of the square unless --one-pass), after the cast-shadow
+   symmetries of the square unless --one-pass, and over the framings of ``light.framings``
+   unless --framings), after the cast-shadow
    reversal test, after contour alignment and after self-calibration (the stages of
    ``light=selfcal``), the self-calibrated intensity error, the normal MAE of the robust
    initialisation with each of those lights and with the true ones, and the self-calibration's
@@ -30,7 +31,7 @@ from scipy.spatial.transform import Rotation
 from unps.data.catalogue import subjects
 from unps.data.diligent import read_diligent_object
 from unps.errors import InputError
-from unps.lightnet.estimate import network_estimate
+from unps.lightnet.estimate import FRAMINGS, network_estimate
 from unps.lights import Lights, light_errors, with_lights
 from unps.lights.contour import align_to_contour
 from unps.lights.reversal import resolve_reversal
@@ -75,14 +76,16 @@ def rpca_error(subject, lights: Lights) -> float:
 
 
 def compare(names, data: Path, settings: SelfCalibration, symmetric: bool = True,
-            align: bool = False) -> None:
-    """One row per subject; ``symmetric`` and ``align`` as ``light.symmetric`` and
-    ``light.align=contour`` (False: the contour column repeats the reversal's)."""
+            framings: tuple[float, ...] = FRAMINGS, align: bool = False) -> None:
+    """One row per subject; ``symmetric``, ``framings`` and ``align`` as ``light.symmetric``,
+    ``light.framings`` and ``light.align=contour`` (False: the contour column repeats the
+    reversal's)."""
     print(f"{'subject':<10} {'network':>8} {'reversal':>8} {'contour':>8} {'selfcal':>8} {'int err':>8} │ "
           f"{'RPCA with: network':>19} {'contour':>8} {'selfcal':>8} {'GT':>6} │ {'time':>6}")
     for name, subject in available(names, data):
         truth = Lights(subject.light_directions, subject.light_intensities, "gt")
-        network = network_estimate(subject, None, soft_decode=True, symmetric=symmetric)
+        network = network_estimate(subject, None, soft_decode=True, symmetric=symmetric,
+                                   framings=framings)
         tested, normals = resolve_reversal(subject, network)
         contour = align_to_contour(subject, tested, normals) if align else tested
         start = time.perf_counter()
@@ -134,6 +137,8 @@ def main():
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--one-pass", action="store_true",
                         help="the network run once, not averaged over the symmetries (light.symmetric=false)")
+    parser.add_argument("--framings", type=float, nargs="+", default=list(FRAMINGS),
+                        help="as light.framings (1: the object filling the input, as before 2026-11-25)")
     parser.add_argument("--align", choices=("contour", "none"), default="none",
                         help="as light.align (none: null)")
     parser.add_argument("--shadows-every", type=int, default=SelfCalibration.shadows_every,
@@ -143,7 +148,8 @@ def main():
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(name)s: %(message)s")
     settings = SelfCalibration(shadows_every=args.shadows_every)
-    compare(args.subjects, args.data, settings, not args.one_pass, args.align == "contour")
+    compare(args.subjects, args.data, settings, not args.one_pass, tuple(args.framings),
+            args.align == "contour")
     if not args.no_perturbation:
         perturbation(args.perturb, args.data, settings, args.seed)
 

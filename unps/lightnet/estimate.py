@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from collections.abc import Sequence
 
 import numpy as np
 import torch
@@ -22,26 +23,35 @@ from unps.timing import stage
 
 log = logging.getLogger(__name__)
 
-SPREAD_WARNING = 10.0   # degrees; the shipped weights stay under 4.1° on every subject measured
-                        # (experiments/light_estimation/README.md), flipped ones included
+FRAMINGS = (1.0, 0.9, 0.8, 0.7)
+"""How much of the network's input the object fills in its passes (``light.framings``): training
+shapes fill 0.4-1.0 of it, a capture cropped to its object all of it, and the network's answers
+at these four framings point different ways, so their mean beats most of them
+(``experiments/light_estimation/README.md``)."""
+SPREAD_WARNING = 10.0   # degrees; the default passes of the shipped weights stay under 8.7° (Rose)
+                        # on every subject measured (experiments/light_estimation/README.md),
+                        # flipped ones included
 
 
-def network_input(images: np.ndarray, mask: np.ndarray, resolution: int
+def network_input(images: np.ndarray, mask: np.ndarray, resolution: int, fill: float = 1.0
                   ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Crop to the mask's bounding square and resize to the network's resolution.
+    """Crop a square around the mask's bounding box and resize it to the network's resolution.
 
-    Only the network sees this; every other step uses the full-resolution images.
+    Only the network sees this; every other step uses the full-resolution images. The camera is
+    orthographic, so a smaller ``fill`` shows the same scene, smaller: the lights are unchanged.
 
     Args:
         images: (n, H, W, 3) captured images (not divided by intensities).
         mask: (H, W) bool.
+        fill: the bounding box's longer side as a share of the square's, in (0, 1]; the rest is
+            empty margin, zero beyond the image.
 
     Returns:
         images (1, n, 3, R, R) and mask (1, 1, R, R), float32.
     """
     rows, cols = np.nonzero(mask)
     centre_r, centre_c = (rows.min() + rows.max()) / 2, (cols.min() + cols.max()) / 2
-    half = max(rows.max() - rows.min(), cols.max() - cols.min()) / 2 + 1
+    half = (max(rows.max() - rows.min(), cols.max() - cols.min()) / 2 + 1) / fill
     top, left = int(np.floor(centre_r - half)), int(np.floor(centre_c - half))
     side = int(np.ceil(2 * half))
     pad = [(max(0, -top), max(0, top + side - mask.shape[0])),
@@ -57,8 +67,9 @@ def network_input(images: np.ndarray, mask: np.ndarray, resolution: int
 
 
 def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode: bool = True,
-                    symmetric: bool = True, reversal: str | None = "shadows",
-                    align: str | None = None, selfcal: SelfCalibration | None = None) -> Lights:
+                    symmetric: bool = True, framings: Sequence[float] = FRAMINGS,
+                    reversal: str | None = "shadows", align: str | None = None,
+                    selfcal: SelfCalibration | None = None) -> Lights:
     """Directions and relative intensities of every image, from the captured images alone.
 
     Args:
@@ -68,6 +79,9 @@ def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode
         symmetric: average the network's estimates under the eight symmetries of the square
             (:mod:`unps.lightnet.symmetry`; beyond the paper) and warn when they disagree by more
             than :data:`SPREAD_WARNING` (median over the lights); False runs the network once.
+        framings: how much of the network's square input the object fills (:func:`network_input`;
+            beyond the paper), taken in turn with the symmetries (:func:`paired`) and averaged:
+            the network is not scale-invariant, and its estimates at nearby scales err apart.
         reversal: ``"shadows"`` turns the network's directions half a turn about the view axis
             when the shadows they cast over the reversed surface match the images better
             (:func:`unps.lights.reversal.resolve_reversal`; beyond the paper), None keeps them.
@@ -78,7 +92,7 @@ def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode
             (:func:`unps.lights.selfcal.self_calibrate`; beyond the paper), None skips it.
 
     Raises:
-        InputError: another ``reversal`` or ``align``.
+        InputError: another ``reversal`` or ``align``; no ``framings``, or one outside (0, 1].
 
     Returns:
         Lights with (n, 3) unit directions and (n, 3) intensities (one value per image,
@@ -88,10 +102,10 @@ def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode
         raise InputError(f"light.reversal must be shadows or null, got {reversal!r}")
     if align not in (None, "contour"):
         raise InputError(f"light.align must be contour or null, got {align!r}")
+    framings = checked_framings(framings)
     with stage("light network"):
-        lights = network_estimate(subject, checkpoint, soft_decode, symmetric)
-    weights = checkpoint or "shipped weights"
-    log_stage(f"network ({weights}, mean of 8 symmetries)" if symmetric else f"network ({weights})",
+        lights = network_estimate(subject, checkpoint, soft_decode, symmetric, framings)
+    log_stage(f"network ({checkpoint or 'shipped weights'}, {describe_passes(symmetric, framings)})",
               lights, subject)
     spread = lights.spread_deg
     if spread is not None:
@@ -112,46 +126,113 @@ def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode
     return dataclasses.replace(lights, spread_deg=spread)
 
 
+def checked_framings(framings: Sequence[float] | float) -> tuple[float, ...]:
+    """``light.framings`` as a tuple; one number is one framing.
+
+    Raises:
+        InputError: no framings, or one that is not a number in (0, 1].
+
+    >>> checked_framings(0.8), checked_framings([1, 0.9])
+    ((0.8,), (1.0, 0.9))
+    """
+    if isinstance(framings, (int, float)):
+        framings = [framings]
+    try:
+        values = tuple(float(f) for f in framings)
+    except (TypeError, ValueError):
+        raise InputError(f"light.framings: a list of numbers in (0, 1], got {framings!r}") from None
+    if not values or not all(0 < f <= 1 for f in values):
+        raise InputError(f"light.framings: shares of the network's input the object fills, each in "
+                         f"(0, 1]; got {list(values)}")
+    return values
+
+
+def describe_passes(symmetric: bool, framings: Sequence[float]) -> str:
+    """The network's passes, for the log.
+
+    >>> describe_passes(True, (1.0, 0.9, 0.8, 0.7))
+    'mean of 8 passes: the 8 symmetries, framings 1, 0.9, 0.8, 0.7 in turn'
+    >>> describe_passes(False, (1.0,))
+    'one pass'
+    """
+    count = max(8 if symmetric else 1, len(framings))
+    if count == 1:
+        return "one pass"
+    parts = (["the 8 symmetries"] if symmetric else []) + (
+        ["framings " + ", ".join(f"{f:g}" for f in framings)] if len(framings) > 1 else [])
+    return f"mean of {count} passes: " + ", ".join(parts) + (" in turn" if len(parts) > 1 else "")
+
+
 def warn_if_uncertain(spread: np.ndarray) -> None:
-    """Log the spread of the symmetric estimates; a warning when its median is large."""
+    """Log the spread of the network's passes; a warning when its median is large."""
     median = float(np.median(spread))
-    log.info("the light network's estimates under the 8 symmetries of the image disagree by %.1f° "
+    log.info("the light network's passes (symmetries and framings of the image) disagree by %.1f° "
              "(median over the lights; %.1f° at most)", median, float(spread.max()))
     if median > SPREAD_WARNING:
-        log.warning("the estimated lights are uncertain: the light network's estimates under the 8 "
-                    "symmetries of the image disagree by %.1f° (median over the lights, above %.0f°); "
+        log.warning("the estimated lights are uncertain: the light network's passes over the "
+                    "symmetries and framings of the image disagree by %.1f° (median over the lights, "
+                    "above %.0f°); "
                     "expect light errors of tens of degrees — use light=gt if the lights are known, "
                     "or check light=selfcal against a calibration shot", median, SPREAD_WARNING)
 
 
 @torch.no_grad()
 def network_estimate(subject: Subject, checkpoint: str | None, soft_decode: bool,
-                     symmetric: bool = False) -> Lights:
+                     symmetric: bool = False, framings: Sequence[float] = (1.0,)) -> Lights:
     """The light network's directions and intensities (mean 1, repeated for RGB).
 
-    With ``symmetric``, the mean of its estimates under the eight symmetries of the square
-    (:mod:`unps.lightnet.symmetry`), each mapped back, with their spread in ``spread_deg``.
+    Passes over the framings (:func:`network_input`'s ``fill``) and, with ``symmetric``, the
+    eight symmetries of the square (:mod:`unps.lightnet.symmetry`, each answer mapped back),
+    taken in turn (:func:`paired`); more than one pass gives their mean, and their spread in
+    ``spread_deg``.
     """
     net, config = load_lightnet(checkpoint)
     resolution = config["recipe"]["resolution"]
-    images, mask = network_input(subject.observed_images(), subject.mask, resolution)
-
-    def estimate(turns: int, mirror: bool) -> tuple[torch.Tensor, torch.Tensor]:
-        logits = net(transform_images(images, turns, mirror), transform_images(mask, turns, mirror))
-        seen, relative = decode_lights(logits["azimuth"], logits["elevation"], logits["intensity"],
-                                       soft_decode)
-        return seen[0] @ frame_matrix(turns, mirror), relative[0] / relative[0].mean()   # Mᵀ·l per row
-
+    observed = subject.observed_images()
+    frames = SYMMETRIES if symmetric else ((0, False),)
+    inputs = {fill: network_input(observed, subject.mask, resolution, fill) for fill in framings}
+    estimates = [network_pass(net, *inputs[fill], *frame, soft_decode=soft_decode)
+                 for fill, frame in paired(framings, frames)]
     spread = None
-    if symmetric:
-        directions, intensities = map(torch.stack, zip(*(estimate(*g) for g in SYMMETRIES)))
+    if len(estimates) > 1:
+        directions, intensities = map(torch.stack, zip(*estimates))
         directions, spread = mean_direction(directions)
         intensities = intensities.mean(0) / intensities.mean()
     else:
-        directions, intensities = estimate(0, False)
+        (directions, intensities), = estimates
     return Lights(directions.numpy().astype(np.float32),
                   intensities[:, None].repeat(1, 3).numpy().astype(np.float32), "estimated",
                   spread_deg=None if spread is None else spread.numpy())
+
+
+@torch.no_grad()
+def network_pass(net: torch.nn.Module, images: torch.Tensor, mask: torch.Tensor, turns: int = 0,
+                 mirror: bool = False, soft_decode: bool = True) -> tuple[torch.Tensor, torch.Tensor]:
+    """One pass of the network over one stack shown under one symmetry of the square, mapped back.
+
+    Args:
+        images: (1, n, 3, R, R) and mask (1, 1, R, R), as :func:`network_input` gives them.
+
+    Returns:
+        (n, 3) unit directions in the stack's own frame (x right, y up, z toward the camera) and
+        (n,) relative intensities, mean 1.
+    """
+    logits = net(transform_images(images, turns, mirror), transform_images(mask, turns, mirror))
+    seen, relative = decode_lights(logits["azimuth"], logits["elevation"], logits["intensity"],
+                                   soft_decode)
+    return seen[0] @ frame_matrix(turns, mirror), relative[0] / relative[0].mean()   # Mᵀ·l per row
+
+
+def paired(framings: Sequence[float], frames: Sequence) -> list[tuple[float, object]]:
+    """The network's passes: each symmetry and each framing in turn, as many passes as the longer
+    list (not every pair: eight passes take most of what the 32 pairs of 8 symmetries and 4
+    framings give, ``experiments/light_estimation/README.md``).
+
+    >>> paired([1.0, 0.8], ["a", "b", "c"])
+    [(1.0, 'a'), (0.8, 'b'), (1.0, 'c')]
+    """
+    count = max(len(framings), len(frames))
+    return [(framings[k % len(framings)], frames[k % len(frames)]) for k in range(count)]
 
 
 def log_stage(name: str, lights: Lights, subject: Subject) -> None:
