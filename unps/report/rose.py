@@ -17,7 +17,7 @@ def report_rose(runs: Sequence[Run], out: Path) -> tuple[str, list[Path]]:
     rows.append(["Rose (paper)", "estimated", fmt(PAPER_ROSE_MAE), "—", "—"])
     table = markdown_table(["subject", "light", "MAE (°)", "median (°)", "< 30°"], rows)
     cells = [[("ground truth", read_rgb(r.folder / "normals_gt.png")), *qualitative_row(r),
-              ("observed / reconstructed / difference", read_rgb(r.folder / "reconstruction.png"))]
+              ("reconstruction", read_rgb(r.folder / "reconstruction.png"))]
              for r in ordered]
     fig = picture_grid(cells, "The failure case: Rose (supplementary Fig. 1)")
     return table, [save(fig, out / "rose.png")]
