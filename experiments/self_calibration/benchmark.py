@@ -31,7 +31,7 @@ from scipy.spatial.transform import Rotation
 from unps.data.catalogue import subjects
 from unps.data.diligent import read_diligent_object
 from unps.errors import InputError
-from unps.lightnet.estimate import FRAMINGS, network_estimate
+from unps.lightnet.estimate import FRAMINGS, checked_framings, network_estimate
 from unps.lights import Lights, light_errors, with_lights
 from unps.lights.contour import align_to_contour
 from unps.lights.reversal import resolve_reversal
@@ -148,8 +148,11 @@ def main():
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(name)s: %(message)s")
     settings = SelfCalibration(shadows_every=args.shadows_every)
-    compare(args.subjects, args.data, settings, not args.one_pass, tuple(args.framings),
-            args.align == "contour")
+    try:
+        framings = checked_framings(args.framings)
+    except InputError as e:
+        parser.error(str(e))
+    compare(args.subjects, args.data, settings, not args.one_pass, framings, args.align == "contour")
     if not args.no_perturbation:
         perturbation(args.perturb, args.data, settings, args.seed)
 

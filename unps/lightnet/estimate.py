@@ -78,7 +78,7 @@ def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode
         soft_decode: soft-arg-max decoding of the bins (else arg-max).
         symmetric: average the network's estimates under the eight symmetries of the square
             (:mod:`unps.lightnet.symmetry`; beyond the paper) and warn when they disagree by more
-            than :data:`SPREAD_WARNING` (median over the lights); False runs the network once.
+            than :data:`SPREAD_WARNING` (median over the lights); False runs it once per framing.
         framings: how much of the network's square input the object fills (:func:`network_input`;
             beyond the paper), taken in turn with the symmetries (:func:`paired`) and averaged:
             the network is not scale-invariant, and its estimates at nearby scales err apart.
