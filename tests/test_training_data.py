@@ -59,6 +59,33 @@ def test_rasterising_keeps_the_nearest_point_and_its_normal():
     assert not mask[:2].any()                                       # beyond both sheets
 
 
+def test_a_sheet_shows_the_camera_whichever_side_faces_it():
+    t = torch.linspace(-0.5, 0.5, 200)
+    square = torch.stack(torch.meshgrid(t, t, indexing="ij"), -1).reshape(-1, 2)
+    points = torch.cat([square, torch.zeros(len(square), 1)], 1)
+    away = F.normalize(torch.tensor([0.3, 0.0, -1.0]), dim=0).expand_as(points)
+    _, _, one_sided = lathe.rasterise(points, away, 64)
+    normals, _, mask = lathe.rasterise(points, away, 64, two_sided=True)
+    assert not one_sided.any()
+    centre = (slice(24, 40),) * 2
+    assert mask[centre].all()
+    torch.testing.assert_close(normals[centre], (-away[0]).expand(16, 16, 3))
+
+
+def test_a_jar_of_no_thickness_is_one_sheet_without_a_lip():
+    def radius(h):
+        return 0.4 + 0.1 * torch.cos(3 * h)
+
+    points, normals = lathe.profile_points(radius, 1.2, 0.3, 0.0, samples=64)
+    on_wall = points[:, 2] > 0
+    height = points[on_wall, 2] / 1.2
+    torch.testing.assert_close(points[on_wall, :2].norm(dim=-1), radius(height))   # no inner wall
+    outward = (normals[on_wall, :2] * points[on_wall, :2]).sum(-1)
+    assert (outward > 0).all()                                  # no lip ring, no inner floor
+    thick, _ = lathe.profile_points(radius, 1.2, 0.3, 0.03, samples=64)
+    assert len(thick) > 1.9 * len(points)
+
+
 def test_jars_show_their_inside_past_the_near_lip():
     shown_inside = 0
     for index in range(6):
@@ -95,6 +122,13 @@ def test_light_layouts_give_unit_directions_toward_the_camera(layout):
         assert (lights[:, 2] >= math.cos(math.radians(60)) - 1e-6).all()
     if layout == "ring":
         assert len(torch.unique(lights[:, 2].round(decimals=5))) <= 3
+
+
+def test_a_dataset_iterates_over_its_length_and_no_further():
+    data = LightDataset(3, resolution=32, images=4)
+    assert len(list(data)) == 3
+    with pytest.raises(IndexError):
+        data[3]
 
 
 def test_quantisation_matches_reading_the_same_data_from_files(tmp_path):

@@ -24,7 +24,8 @@ def profile_points(radius, height: float, floor: float, wall: float, samples: in
         radius: callable (k,) heights in [0, 1] → (k,) outer radii.
         height: the jar's height.
         floor: height of the inside floor, as a share of ``height``.
-        wall: wall thickness (0: one sheet, its inside the back of its outside).
+        wall: wall thickness; 0 gives one sheet with no lip and no separate inside floor (its
+            inside is the back of its outside: rasterise it ``two_sided``).
         samples: points around the axis; the other directions are sampled in proportion.
 
     Returns:
@@ -35,9 +36,12 @@ def profile_points(radius, height: float, floor: float, wall: float, samples: in
     h = torch.linspace(0, 1, samples)
     outer = radius(h)
     slope = torch.gradient(outer, spacing=1 / (samples - 1))[0] / height     # dr/dz
+    base = torch.linspace(0, 1, samples // 4)[:, None]
+    if wall == 0:
+        sheet = [_wall(ring, outer, h * height, slope, 1.0), _disc(ring, base * outer[0], 0.0, -1.0)]
+        return torch.cat([p for p, _ in sheet]), torch.cat([n for _, n in sheet])
     inner = (outer - wall).clamp_min(0.02)
     inside = h >= floor
-    base = torch.linspace(0, 1, samples // 4)[:, None]
     parts = [                                                                 # (points, normals)
         _wall(ring, outer, h * height, slope, 1.0),
         _wall(ring, inner[inside], h[inside] * height, slope[inside], -1.0),
@@ -46,6 +50,31 @@ def profile_points(radius, height: float, floor: float, wall: float, samples: in
         _disc(ring, inner[-1] + base * (outer[-1] - inner[-1]), height, 1.0),
     ]
     return torch.cat([p for p, _ in parts]), torch.cat([n for _, n in parts])
+
+
+def jar_view(radius, height: float, floor: float, wall: float, tilt: float, turn: float,
+             extent: float, resolution: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """A jar of :func:`profile_points` seen tilted and turned, centred, rasterised.
+
+    Args:
+        radius, height, floor, wall: as :func:`profile_points` (``wall`` 0: one sheet, shown
+            two-sided).
+        tilt: radians away from looking into the mouth (about x; 0: into the mouth).
+        turn: radians about the view axis, after the tilt.
+        extent: the jar's longer side in the image, in view units (the view is 2 wide).
+        resolution: image side in pixels.
+
+    Returns:
+        normals (R, R, 3), depth (R, R) and mask (R, R), as :func:`rasterise`.
+    """
+    points, normals = profile_points(radius, height, floor, wall, samples=4 * resolution)
+    c, s, ct, st = math.cos(tilt), math.sin(tilt), math.cos(turn), math.sin(turn)
+    rotation = torch.tensor([[ct, -st, 0], [st, ct, 0], [0, 0, 1.0]]) @ torch.tensor(
+        [[1.0, 0, 0], [0, c, -s], [0, s, c]])
+    points, normals = points @ rotation.T, normals @ rotation.T
+    low, high = points.min(0).values, points.max(0).values
+    points = (points - (low + high) / 2) * (extent / float((high - low)[:2].max()))
+    return rasterise(points, normals, resolution, two_sided=wall == 0)
 
 
 def _wall(ring, r, z, slope, side: float):
@@ -61,18 +90,22 @@ def _disc(ring, r, z: float, up: float):
     return points, torch.tensor([0.0, 0.0, up]).expand_as(points)
 
 
-def rasterise(points: torch.Tensor, normals: torch.Tensor, resolution: int
-              ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def rasterise(points: torch.Tensor, normals: torch.Tensor, resolution: int,
+              two_sided: bool = False) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Nearest visible point per pixel, orthographic along −z.
 
     Args:
         points, normals: (p, 3) in view units, x and y within [−1, 1].
+        two_sided: the points sample a sheet with no thickness, which shows the camera
+            whichever of its sides faces it: each normal is turned toward the camera.
 
     Returns:
         normals (R, R, 3) unit, depth (R, R) and mask (R, R) bool: pixels whose nearest point
         faces the camera, with no empty pixel inside the mask (the few that no point hit are
         filled from their neighbours).
     """
+    if two_sided:
+        normals = normals * torch.where(normals[:, 2:] < 0, -1.0, 1.0)
     col = ((points[:, 0] + 1) / 2 * (resolution - 1)).round().long().clamp(0, resolution - 1)
     row = ((1 - points[:, 1]) / 2 * (resolution - 1)).round().long().clamp(0, resolution - 1)
     pixel = row * resolution + col

@@ -161,10 +161,14 @@ def sculpture(resolution: int, generator: torch.Generator) -> ShapeMaps:
     return maps_from_depth(z, _eroded(mask))
 
 
+SHEET_JARS = 0.5   # share of jars made of one sheet: no lip, the inside the back of the outside
+
+
 def jar(resolution: int, generator: torch.Generator) -> ShapeMaps:
     """A jar, vase or cup (an open surface of revolution with a random profile and wall) tilted
     0–85° away from looking into its mouth: the near lip hides part of the cavity, the far inner
-    wall stands up behind it (:mod:`unps.lightnet.lathe`)."""
+    wall stands up behind it (:mod:`unps.lightnet.lathe`). A share :data:`SHEET_JARS` of them
+    are one sheet with no thickness, whose mouth is a sharp edge rather than a visible lip."""
     u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
     k = torch.arange(1, 4)
     waves, phases = (u(3) - 0.5) * 0.5 / k, 2 * math.pi * u(3)
@@ -173,16 +177,11 @@ def jar(resolution: int, generator: torch.Generator) -> ShapeMaps:
         return 0.5 * (1 + (waves * torch.cos(math.pi * k * h[:, None] + phases)).sum(-1))
 
     height, floor, wall = 0.5 + 1.5 * float(u(1)), 0.05 + 0.55 * float(u(1)), 0.01 + 0.05 * float(u(1))
-    points, normals = lathe.profile_points(radius, height, floor, wall, samples=4 * resolution)
+    sheet = float(u(1)) < SHEET_JARS        # thin glazed ware, a vase's flared mouth: no lip to see
     tilt, turn = math.radians(85) * float(u(1)), 2 * math.pi * float(u(1))
-    c, s, ct, st = math.cos(tilt), math.sin(tilt), math.cos(turn), math.sin(turn)
-    rotation = torch.tensor([[ct, -st, 0], [st, ct, 0], [0, 0, 1.0]]) @ torch.tensor(   # tilt about x,
-        [[1.0, 0, 0], [0, c, -s], [0, s, c]])                                           # turn about z
-    points, normals = points @ rotation.T, normals @ rotation.T
-    low, high = points.min(0).values, points.max(0).values
     extent = 1.8 * (0.75 + 0.25 * float(u(1)))                    # of the view's width 2
-    points = (points - (low + high) / 2) * (extent / float((high - low)[:2].max()))
-    return ShapeMaps(*lathe.rasterise(points, normals, resolution))
+    return ShapeMaps(*lathe.jar_view(radius, height, floor, 0.0 if sheet else wall, tilt, turn,
+                                     extent, resolution))
 
 
 SHAPES = {"blob": blob, "vessel": vessel, "relief": relief, "slab": slab, "sculpture": sculpture,

@@ -84,6 +84,8 @@ class LightDataset(Dataset):
         return self.length
 
     def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+        if not 0 <= index < self.length:     # also ends ``for sample in dataset``
+            raise IndexError(f"sample {index} of a dataset of {self.length}")
         g = sample_generator(self.seed, self.offset + index)
         u = lambda *shape: torch.rand(*shape, generator=g)           # noqa: E731
         if self.meshes and self.shape is None and float(u(1)) < self.mesh_fraction:
