@@ -341,3 +341,15 @@ def test_concave_failures_tells_a_half_turn_from_a_distortion():
     distorted /= np.linalg.norm(distorted, axis=1, keepdims=True)
     assert failures.mapped_error(best_rotation(truth, distorted), truth, distorted) > 3
     assert failures.mapped_error(failures.best_linear(truth, distorted), truth, distorted) < 2
+
+
+def test_sheet_jars_scores_the_shipped_network_on_a_walled_jar_of_the_vases_outline():
+    sheets = load_script("sheet_jars", "experiments/light_estimation/sheet_jars.py")
+    from unps.lightnet.system import load_lightnet
+
+    net, config = load_lightnet(None)
+    walled, sheet = sheets.vase_jar(0.03, 40, 64), sheets.vase_jar(0.0, 40, 64)
+    assert sheet.mask.sum() < walled.mask.sum()          # no lip ring around the mouth
+    assert (sheet.normals[sheet.mask][:, 2] > 0).all()   # the inside seen from the side facing it
+    error = sheets.symmetric_error(net, walled, stacks=2, resolution=config["recipe"]["resolution"])
+    assert 0 < error < 20                                 # 7° over 48 stacks (its README)

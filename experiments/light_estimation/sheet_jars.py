@@ -22,15 +22,15 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import torch
 import torch.nn.functional as F
-from hydra import compose, initialize_config_module
-from hydra.utils import instantiate
 
 from unps.lightnet import lathe
-from unps.lightnet.estimate import network_input, network_pass
+from unps.lightnet.estimate import network_estimate, network_input, network_pass
 from unps.lightnet.materials import MaterialBank
 from unps.lightnet.rig import Camera
 from unps.lightnet.shapes import ShapeMaps
@@ -40,13 +40,10 @@ from unps.lightnet.system import load_lightnet
 from unps.metrics import light_direction_mae
 from unps.synthetic.shapes import vase_profile
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from concave_failures import render  # noqa: E402
+
 VASE_HEIGHT, VASE_TILT_DEG = 1.5, 50.0      # unps/conf/subject/Vase.yaml, unps.synthetic.shapes.vase
-
-
-def rendered(name: str):
-    """A subject as configured (its cached Mitsuba render)."""
-    with initialize_config_module("unps.conf", version_base=None):
-        return instantiate(compose("fit", overrides=[f"subject={name}"]).subject, _partial_=True)()
 
 
 def subject_maps(subject, resolution: int) -> ShapeMaps:
@@ -90,16 +87,6 @@ def symmetric_error(net: torch.nn.Module, maps: ShapeMaps, stacks: int, resoluti
     return float(np.mean(errors))
 
 
-@torch.no_grad()
-def render_error(net: torch.nn.Module, subject, resolution: int) -> float:
-    """Direction MAE (degrees) of the eight-symmetry mean on the subject's own images, framed to
-    fill the network's input."""
-    images, mask = network_input(subject.observed_images(), subject.mask, resolution)
-    passes = torch.stack([network_pass(net, images, mask, turns, mirror)[0]
-                          for turns, mirror in SYMMETRIES])
-    return light_direction_mae(mean_direction(passes)[0].numpy(), subject.light_directions)
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--checkpoint", help="default: the weights shipped with unps")
@@ -109,9 +96,11 @@ def main() -> None:
     net, config = load_lightnet(args.checkpoint)
     resolution = config["recipe"]["resolution"]
     tilt = 90 - VASE_TILT_DEG
-    vase = rendered("Vase")
+    vase = render("Vase")
+    on_render = network_estimate(vase, args.checkpoint, soft_decode=True, symmetric=True)
     print(f"weights: {args.checkpoint or 'shipped'}; the Vase as rendered (Mitsuba, "
-          f"{len(vase.light_directions)} images): {render_error(net, vase, resolution):.2f}°")
+          f"{len(vase.light_directions)} images): "
+          f"{light_direction_mae(on_render.directions, vase.light_directions):.2f}°")
     rows = [("the Vase's own maps", subject_maps(vase, resolution))]
     rows += [(f"jar of its outline, wall 0.03, tilt {tilt:.0f}°", vase_jar(0.03, tilt, resolution)),
              (f"jar of its outline, wall 0.003, tilt {tilt:.0f}°", vase_jar(0.003, tilt, resolution))]
