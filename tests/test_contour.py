@@ -1,14 +1,12 @@
 """The occluding-contour alignment of estimated lights (unps.lights.contour)."""
 
 import numpy as np
-import pytest
 from scipy.spatial.transform import Rotation
 
 from unps.data.analytic import render_lambertian
-from unps.errors import InputError
 from unps.lights import Lights
 from unps.metrics import angular_error
-from unps.lights.contour import align_to_contour, contour_rotation, outward_normals, rotation_angle
+from unps.lights.contour import ContourAlignment, contour_rotation, outward_normals, rotation_angle
 
 
 def disc(size=48, radius=18.0, centre=(24, 24)):
@@ -49,12 +47,13 @@ def test_contour_rotation_declines_what_it_cannot_trust():
     assert rotation is None and "fewer than" in why
 
 
-def test_align_to_contour_corrects_globally_rotated_lights():
+def test_contour_alignment_corrects_globally_rotated_lights():
     sphere = render_lambertian("sphere", size=64, n_lights=16)
     turn = Rotation.from_euler("xyz", [-8, 12, 10], degrees=True).as_matrix()
     estimate = Lights((sphere.light_directions @ turn.T).astype(np.float32), sphere.light_intensities,
                       "estimated")
-    aligned = align_to_contour(sphere, estimate)
+    aligned, verdict = ContourAlignment()(sphere, estimate)
+    assert verdict.outcome == "changed" and verdict.evidence["rotation_deg"] > 10
     before = angular_error(estimate.directions, sphere.light_directions).mean()
     after = angular_error(aligned.directions, sphere.light_directions).mean()
     assert before > 10 and after < before / 3
@@ -62,24 +61,19 @@ def test_align_to_contour_corrects_globally_rotated_lights():
     assert aligned.source == "estimated"
 
 
-def test_estimate_lights_refuses_an_unknown_alignment():
-    from unps.lightnet.estimate import estimate_lights
-    with pytest.raises(InputError, match="light.align"):
-        estimate_lights(render_lambertian(size=16, n_lights=4), align="boundary")
-
-
-def test_align_to_contour_keeps_lights_that_are_off_by_less_than_it_can_tell():
+def test_contour_alignment_keeps_lights_that_are_off_by_less_than_it_can_tell():
     sphere = render_lambertian("sphere", size=64, n_lights=16)
     turn = Rotation.from_euler("z", 2, degrees=True).as_matrix()
     estimate = Lights((sphere.light_directions @ turn.T).astype(np.float32), sphere.light_intensities,
                       "estimated")
-    np.testing.assert_array_equal(align_to_contour(sphere, estimate).directions, estimate.directions)
+    kept, verdict = ContourAlignment()(sphere, estimate)
+    assert kept is estimate and verdict.outcome == "kept" and "under the 5°" in verdict.reason
 
 
-def test_align_to_contour_keeps_lights_it_would_turn_by_more_than_it_is_trusted_to(caplog):
+def test_contour_alignment_keeps_lights_it_would_turn_by_more_than_it_is_trusted_to():
     sphere = render_lambertian("sphere", size=64, n_lights=16)
     turn = Rotation.from_euler("z", 90, degrees=True).as_matrix()
     estimate = Lights((sphere.light_directions @ turn.T).astype(np.float32), sphere.light_intensities,
                       "estimated")
-    np.testing.assert_array_equal(align_to_contour(sphere, estimate).directions, estimate.directions)
-    assert "trusted to correct" in caplog.text
+    kept, verdict = ContourAlignment()(sphere, estimate)
+    assert kept is estimate and verdict.outcome == "declined" and "trusted to correct" in verdict.reason

@@ -12,7 +12,7 @@ from unps.errors import InputError
 from unps.lightnet import bins
 from unps.lightnet.brdf import (AnalyticBRDF, MERL_SHAPE, ggx_lobe, half_diff_angles,
                                 read_merl_binary, read_neural_brdf)
-from unps.lightnet.estimate import estimate_lights, network_input
+from unps.lightnet.estimate import network_input, network_lights
 from unps.lightnet.network import LATE_STRIDES, LCNET_STRIDES, LightNet
 from unps.lightnet.shapes import cast_shadows, maps_from_depth
 from unps.lightnet.synthesis import LightDataset
@@ -334,15 +334,16 @@ def test_network_input_frames_the_object_to_the_share_asked():
 
 
 @pytest.mark.parametrize("framings", [[], [1.0, 1.5], [0.0], [-0.5], "abc", ["x"], None])
-def test_estimate_lights_refuses_framings_outside_the_unit_interval(framings):
+def test_network_lights_refuses_framings_outside_the_unit_interval(framings):
     from unps.data.analytic import render_lambertian
     with pytest.raises(InputError, match="light.framings"):
-        estimate_lights(render_lambertian(size=16, n_lights=4), framings=framings)
+        network_lights(render_lambertian(size=16, n_lights=4), framings=framings)
 
 
 def test_several_framings_are_averaged_and_report_their_spread(sphere):
-    one = estimate_lights(sphere, symmetric=False, framings=[1.0], reversal=None)
-    three = estimate_lights(sphere, symmetric=False, framings=[1.0, 0.85, 0.7], reversal=None)
+    one, _ = network_lights(sphere, symmetric=False, framings=[1.0])
+    three, verdict = network_lights(sphere, symmetric=False, framings=[1.0, 0.85, 0.7])
+    assert verdict.stage == "network" and verdict.evidence["spread_median_deg"] > 0
     assert one.spread_deg is None
     assert three.spread_deg.shape == (sphere.n_images,) and (three.spread_deg > 0).all()
     np.testing.assert_allclose(np.linalg.norm(three.directions, axis=1), 1, atol=1e-5)
@@ -350,14 +351,25 @@ def test_several_framings_are_averaged_and_report_their_spread(sphere):
     assert not np.allclose(one.directions, three.directions)
 
 
-def test_light_estimated_configures_what_estimate_lights_does_by_default():
+def test_light_estimated_configures_what_the_light_stages_do_by_default():
+    import dataclasses
     import inspect
+
+    from hydra.utils import get_class
+
+    from unps.pipeline.lights import estimated_lights
     with initialize_config_module(config_module="unps.conf", version_base="1.3"):
         light = compose("fit", overrides=["light=estimated"]).light
-    defaults = inspect.signature(estimate_lights).parameters
-    for key in ("soft_decode", "symmetric", "reversal", "align"):
-        assert light[key] == defaults[key].default, key
+    defaults = inspect.signature(estimated_lights).parameters
+    for key in ("checkpoint", "soft_decode", "symmetric", "stages"):
+        assert light[key] == (list(defaults[key].default) if key == "stages" else defaults[key].default), key
     assert list(light.framings) == list(defaults["framings"].default)
+    for stage in ("reversal", "contour", "selfcal"):
+        fields = {f.name: f.default for f in dataclasses.fields(get_class(light[stage]._target_))}
+        for key, value in light[stage].items():
+            if key != "_target_":
+                assert value == (list(fields[key]) if isinstance(fields[key], tuple) else fields[key]), \
+                    (stage, key)
 
 
 def test_missing_or_foreign_weights_are_reported(tmp_path):
@@ -371,7 +383,7 @@ def test_missing_or_foreign_weights_are_reported(tmp_path):
 def test_mesh_views_give_normal_and_depth_maps(tmp_path):
     import trimesh
 
-    from unps.lightnet.shapes import mesh_views
+    from unps.lightnet.meshes import mesh_views
 
     trimesh.creation.icosphere(subdivisions=3).export(tmp_path / "ball.ply")
     (tmp_path / "notes.txt").write_text("not a mesh")
@@ -405,6 +417,23 @@ def test_material_bank_families_and_errors(tmp_path):
     assert value.shape == (1, 3) and (value > 0).all()
 
 
+def test_material_bank_never_draws_the_benchmarks_materials(tmp_path):
+    from unps.lightnet.materials import HELD_OUT_MERL, MaterialBank
+
+    names = sorted(HELD_OUT_MERL)[:3] + ["kept-a", "kept-b"]
+    for name in names:
+        (tmp_path / f"{name}.binary").write_bytes(b"")
+    bank = MaterialBank(analytic=0, merl_dir=str(tmp_path), merl=1)
+    assert [p.stem for p in bank.files["merl"]] == ["kept-a", "kept-b"]
+    everything = MaterialBank(analytic=0, merl_dir=str(tmp_path), merl=1, exclude=frozenset())
+    assert len(everything.files["merl"]) == 5
+    for name in ("kept-a", "kept-b"):
+        (tmp_path / f"{name}.binary").unlink()
+    with pytest.raises(InputError, match="HELD_OUT_MERL"):
+        MaterialBank(analytic=0, merl_dir=str(tmp_path), merl=1)
+    assert len(HELD_OUT_MERL) == 50
+
+
 def test_shipped_weights_load_by_default_and_estimate_a_sphere():
     from unps.data.analytic import render_lambertian
     from unps.lightnet.system import SHIPPED
@@ -414,7 +443,7 @@ def test_shipped_weights_load_by_default_and_estimate_a_sphere():
     notes = torch.load(SHIPPED, weights_only=False)["notes"]
     assert notes["command"].startswith("python -m unps.train") and notes["steps"] > 0
     subject = render_lambertian("sphere", size=64, n_lights=24, seed=1)
-    lights = estimate_lights(subject)
+    lights, _ = network_lights(subject)
     assert light_direction_mae(lights.directions, subject.light_directions) < 8
     np.testing.assert_allclose(lights.intensities.mean(), 1, rtol=1e-5)
 

@@ -1,14 +1,15 @@
 """The convex/concave reversal test of estimated lights by their cast shadows (unps.lights.reversal)."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from conftest import rendered
 from unps.data.analytic import dome_lights
 from unps.data.subject import Subject
-from unps.errors import InputError
 from unps.lights import Lights, with_lights
-from unps.lights.reversal import HALF_TURN, ShadowEvidence, resolve_reversal, shadow_evidence
+from unps.lights.reversal import HALF_TURN, ReversalTest, ShadowEvidence, shadow_evidence
 from unps.solvers.rpca import robust_init
 
 
@@ -29,15 +30,27 @@ def test_the_bowl_casts_shadows_and_the_dome_nearly_none():
     assert (dome.images[..., 0][lit & dome.mask] == 0).mean() < 0.01     # marching rounds at the rim
 
 
-@pytest.mark.parametrize("concave", [True, False])
-def test_lights_read_inside_out_are_turned_back_exactly(concave):
-    subject = rendered(concave)
-    found = evidence(subject, turned(subject))
-    assert found.favours_reversal, found.describe()
-    back, normals = resolve_reversal(subject, turned(subject))
-    np.testing.assert_allclose(back.directions, subject.light_directions, atol=1e-6)
-    right = robust_init(with_lights(subject, back), back.directions).normals
-    np.testing.assert_allclose(normals, right, atol=1e-4)        # turned with the lights
+def test_a_bowl_read_inside_out_is_turned_back_exactly():
+    bowl = rendered(concave=True)
+    found = evidence(bowl, turned(bowl))
+    assert ReversalTest().favours_reversal(found), found.describe()
+    back, verdict = ReversalTest()(bowl, turned(bowl))
+    np.testing.assert_allclose(back.directions, bowl.light_directions, atol=1e-6)
+    assert verdict.stage == "reversal" and verdict.outcome == "changed"
+    assert verdict.evidence["reversed_dark"] > 0.5 * verdict.evidence["reversed_pairs"]
+    assert verdict.evidence["reversed_dark"] > 10 * verdict.evidence["reversed_expected"]
+
+
+def test_a_dome_read_as_a_bowl_is_not_turned_without_dark_shadows_to_show_for_it():
+    """The reversed (dome) reading casts no shadows at all, so nothing in the images is positive
+    evidence for it; that the bowl reading's shadows are missing is not enough."""
+    dome = rendered(concave=False)
+    found = evidence(dome, turned(dome))
+    assert found.current_pairs > 100 and found.current_dark < 0.05 * found.current_pairs
+    assert not ReversalTest().favours_reversal(found), found.describe()
+    estimate = turned(dome)
+    kept, verdict = ReversalTest()(dome, estimate)
+    assert kept is estimate and verdict.outcome == "kept"
 
 
 @pytest.mark.parametrize("concave", [True, False])
@@ -45,8 +58,39 @@ def test_right_lights_are_kept(concave):
     subject = rendered(concave)
     right = Lights(subject.light_directions, None, "estimated")
     found = evidence(subject, right)
-    assert not found.favours_reversal, found.describe()
-    assert resolve_reversal(subject, right)[0] is right
+    assert not ReversalTest().favours_reversal(found), found.describe()
+    kept, verdict = ReversalTest()(subject, right)
+    assert kept is right and verdict.outcome == "kept"
+
+
+def test_a_reading_is_not_turned_for_predicting_fewer_shadows():
+    """The evidence that turned a correct reading of a glossy goblet inside out (2026-11-25): of
+    the shadows only the current reading casts, 12 of 445 dark; of the reversed reading's, 6 of
+    91; 1.9 % of all lit pairs dark. Neither reading's shadows are there: the lights stay."""
+    base = 0.019
+    goblet = ShadowEvidence(lit_pairs=31000, dark_pairs=589, current_pairs=445, current_dark=12,
+                            current_expected=445 * base, reversed_pairs=91, reversed_dark=6,
+                            reversed_expected=91 * base)
+    assert not ReversalTest().favours_reversal(goblet)
+    shown = dataclasses.replace(goblet, reversed_dark=70)           # the reversed shadows dark
+    assert ReversalTest().favours_reversal(shown)
+    dark_anyway = dataclasses.replace(shown, reversed_expected=50.0)   # where the material is dark
+    assert not ReversalTest().favours_reversal(dark_anyway)
+
+
+@pytest.mark.slow
+def test_a_glossy_goblet_on_a_thin_stem_rendered_by_unps_keeps_the_networks_lights():
+    from unps.lightnet.estimate import network_lights
+    from unps.synthetic.render import light_dome, render_subject
+    from unps.synthetic.vessels import goblet
+
+    directions, intensities = light_dome(40, 55, (0.7, 1.3), 0.0, seed=3)
+    cup = render_subject("goblet", goblet(tilt_deg=5), {"type": "roughconductor", "material": "Al",
+                                                         "alpha": 0.15}, None, directions, intensities,
+                         resolution=64, spp=16, max_depth=3, progress=False)
+    estimate, _ = network_lights(cup)
+    kept, verdict = ReversalTest()(cup, estimate)
+    assert kept is estimate and verdict.outcome == "kept", verdict.reason
 
 
 def test_a_flat_subject_gives_no_evidence_and_keeps_its_lights():
@@ -56,12 +100,5 @@ def test_a_flat_subject_gives_no_evidence_and_keeps_its_lights():
     subject = Subject("plane", images.astype(np.float32), mask)
     estimate = Lights(lights, None, "estimated")
     found = evidence(subject, estimate)
-    assert found.current_pairs == found.reversed_pairs == 0 and found.log_odds == 0
-    assert resolve_reversal(subject, estimate)[0] is estimate
-
-
-def test_estimate_lights_refuses_an_unknown_reversal_test():
-    from unps.data.analytic import render_lambertian
-    from unps.lightnet.estimate import estimate_lights
-    with pytest.raises(InputError, match="light.reversal"):
-        estimate_lights(render_lambertian(size=16, n_lights=4), reversal="mirror")
+    assert found.current_pairs == found.reversed_pairs == 0
+    assert ReversalTest()(subject, estimate)[0] is estimate

@@ -83,7 +83,8 @@ def test_aligned_factorization_recovers_the_lights_of_a_lambertian_stack():
 
 def test_self_calibration_undoes_a_15_degree_rotation_of_the_lights(glossy):
     start = rotated(glossy, 15)
-    found = self_calibrate(glossy, start, ROTATION_RECOVERY)
+    found, verdict = self_calibrate(glossy, start, ROTATION_RECOVERY)
+    assert verdict.outcome == "changed"
     before, after = light_errors(start, glossy)["light_dir_mae"], light_errors(found, glossy)
     assert before > 12 and after["light_dir_mae"] < 1.0, after
     assert after["light_int_err"] < 0.03
@@ -111,14 +112,14 @@ def test_self_calibration_of_a_bowl_holds_once_its_cast_shadows_are_rendered():
     bowl = rendered(concave=True)
     start = rotated(bowl, 10)
     errors = {every: light_errors(self_calibrate(bowl, start, SelfCalibration(
-        steps=600, reference_steps=100, max_pixels=1200, shadows_every=every)), bowl)["light_dir_mae"]
+        steps=600, reference_steps=100, max_pixels=1200, shadows_every=every))[0], bowl)["light_dir_mae"]
         for every in (0, 100)}
     assert errors[100] < 3.0 and errors[0] > 4.5, errors
 
 
 def test_self_calibration_is_deterministic(glossy):
     settings = SelfCalibration(steps=60, reference_steps=20, max_pixels=600)
-    first, second = (self_calibrate(glossy, rotated(glossy, 10), settings) for _ in range(2))
+    first, second = (self_calibrate(glossy, rotated(glossy, 10), settings)[0] for _ in range(2))
     np.testing.assert_array_equal(first.directions, second.directions)
     np.testing.assert_array_equal(first.intensities, second.intensities)
 
@@ -126,7 +127,8 @@ def test_self_calibration_is_deterministic(glossy):
 def test_self_calibration_keeps_its_first_guess_when_the_fit_does_not_help(glossy, caplog):
     start = rotated(glossy, 10)
     reckless = SelfCalibration(steps=20, reference_steps=20, max_pixels=600, lr_lights=3.0)
-    assert self_calibrate(glossy, start, reckless) is start
+    kept, verdict = self_calibrate(glossy, start, reckless)
+    assert kept is start and verdict.outcome == "declined"
     assert "keeping the first guess" in caplog.text
 
 
@@ -149,15 +151,19 @@ def test_light_selfcal_in_a_fit_logs_each_stage_and_draws_the_lights(tmp_path, c
     with initialize_config_module(config_module="unps.conf", version_base="1.3"):
         cfg = compose("fit", overrides=[f"paths.output_dir={tmp_path}", "subject=lambertian",
                                         "subject.size=32", "light=selfcal", "method=woodham",
-                                        "light.align=contour",   # every stage, the optional one too
+                                        "light.stages=[reversal,contour,selfcal]",   # every stage
                                         "light.selfcal.steps=60", "light.selfcal.reference_steps=20"])
     with caplog.at_level("INFO"):
         metrics = fit(cfg)
     assert metrics["light"] == "selfcal" and np.isfinite(metrics["light_dir_mae"])
-    stages = [line for line in caplog.text.splitlines() if "lights of 32 images after" in line]
-    assert [s.split(" after ")[1].split(" (")[0].split(",")[0] for s in stages] == \
-        ["network", "reversal test", "contour alignment", "self-calibration"]
+    stages = [line for line in caplog.text.splitlines() if "lights of 32 images after the" in line]
+    assert [s.split(" after the ")[1].split(":")[0] for s in stages] == \
+        ["light network", "reversal test", "contour alignment", "self-calibration"]
     assert all("direction error" in s for s in stages)
+    assert [v["stage"] for v in metrics["light_stages"]] == ["network", "reversal", "contour", "selfcal"]
+    assert all(v["outcome"] in ("changed", "kept", "declined") and v["reason"] and "light_dir_mae" in v
+               for v in metrics["light_stages"])
+    assert metrics["light_stages"][-1]["light_dir_mae"] == pytest.approx(metrics["light_dir_mae"])
     assert (tmp_path / "lights.png").read_bytes()[:4] == b"\x89PNG"
     written = np.loadtxt(tmp_path / "lights.txt")
     assert written.shape == (32, 6)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from unps.lightnet.estimate import estimate_lights
+from unps.lightnet.estimate import network_lights
 from unps.lightnet.symmetry import SYMMETRIES, frame_matrix, mean_direction, transform_images
 from unps.lightnet.shapes import maps_from_depth
 
@@ -42,8 +42,8 @@ def test_mean_direction_and_spread():
 
 
 def test_the_default_estimate_is_symmetric_and_reports_its_spread_one_pass_does_not(sphere):
-    symmetric = estimate_lights(sphere)
-    one_pass = estimate_lights(sphere, symmetric=False, framings=[1.0])
+    symmetric, _ = network_lights(sphere)
+    one_pass, _ = network_lights(sphere, symmetric=False, framings=[1.0])
     assert symmetric.spread_deg.shape == (sphere.n_images,) and (symmetric.spread_deg >= 0).all()
     assert one_pass.spread_deg is None
     np.testing.assert_allclose(np.linalg.norm(symmetric.directions, axis=1), 1, atol=1e-5)

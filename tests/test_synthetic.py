@@ -14,7 +14,7 @@ from unps.data.analytic import render_lambertian
 from unps.data.prepare import add_noise
 from unps.errors import InputError
 from unps.fit import fit
-from unps.synthetic import shapes
+from unps.synthetic import shapes, vessels
 from unps.synthetic.render import light_dome, render_subject
 
 SUBJECTS = list(subjects("synthetic"))
@@ -31,9 +31,11 @@ def load(name, cache, *overrides):
     return instantiate(subject_config(name, cache, *overrides).subject, _partial_=True)(progress=False)
 
 
-@pytest.mark.parametrize("builder", ["sphere", "golf_ball", "face", "tablet", "broken_pot", "vase", "rose"])
+@pytest.mark.parametrize("builder", [shapes.sphere, shapes.golf_ball, shapes.face, shapes.tablet,
+                                     shapes.broken_pot, shapes.rose, vessels.vase, vessels.goblet,
+                                     vessels.bowl])
 def test_shapes_are_deterministic_and_fit_the_view(builder):
-    a, b = getattr(shapes, builder)(), getattr(shapes, builder)()
+    a, b = builder(), builder()
     np.testing.assert_array_equal(a.vertices, b.vertices)
     np.testing.assert_array_equal(a.faces, b.faces)
     assert np.abs(a.vertices[:, :2]).max() <= 0.95

@@ -18,12 +18,14 @@ import logging
 import hydra
 from omegaconf import DictConfig
 
+from unps.cli import command_line
 from unps.errors import exit_on_bad_input
 from unps.pipeline import fit
 
 __all__ = ["fit", "main"]
 
 
+@command_line
 @hydra.main(version_base="1.3", config_path="pkg://unps.conf", config_name="fit")
 @exit_on_bad_input
 def main(cfg: DictConfig) -> None:

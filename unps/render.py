@@ -14,32 +14,16 @@ import logging
 from pathlib import Path
 
 import hydra
-import numpy as np
 from hydra.utils import instantiate
 from omegaconf import DictConfig
 
 from unps.data.subject import Subject
+from unps.cli import command_line
 from unps.errors import InputError, exit_on_bad_input
 from unps.io.images import write_png8
-from unps.io.pictures import normal_rgb
+from unps.io.pictures import image_strip
 
 log = logging.getLogger("unps.render")
-
-
-def preview(subject: Subject, count: int = 7) -> np.ndarray:
-    """A strip of ``count`` evenly spaced images (tone-mapped for display) and the GT normals.
-
-    Returns:
-        (H, (count + 1)·W, 3) uint8.
-    """
-    picks = np.linspace(0, subject.n_images - 1, min(count, subject.n_images)).astype(int)
-    observed = subject.observed_images()[picks]
-    peak = np.percentile(observed[:, subject.mask], 99.5)
-    shown = (np.clip(observed / peak, 0, 1) ** (1 / 2.2) * 255).round().astype(np.uint8)
-    tiles = list(shown)
-    if subject.normals is not None:
-        tiles.append(normal_rgb(subject.normals, subject.mask))
-    return np.concatenate(tiles, axis=1)
 
 
 def render(cfg: DictConfig) -> Subject:
@@ -47,10 +31,12 @@ def render(cfg: DictConfig) -> Subject:
         raise InputError("unps.render renders synthetic subjects only: choose subject= one of "
                          "Vase, Golf-ball, Face, Tablet1, Tablet2, BrokenPot, Rose, Sphere")
     subject = instantiate(cfg.subject, _partial_=True)(force=cfg.render_force)
-    write_png8(Path(cfg.paths.output_dir) / "preview.png", preview(subject))
+    write_png8(Path(cfg.paths.output_dir) / "preview.png",
+               image_strip(subject.observed_images(), subject.mask, subject.normals))
     return subject
 
 
+@command_line
 @hydra.main(version_base="1.3", config_path="pkg://unps.conf", config_name="render")
 @exit_on_bad_input
 def main(cfg: DictConfig) -> None:

@@ -22,6 +22,7 @@ import torch
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
+from unps.cli import command_line
 from unps.errors import InputError, exit_on_bad_input
 
 log = logging.getLogger("unps.train")
@@ -124,6 +125,8 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
         log.info("resuming from %s at step %d with the config saved in it", ckpt, start_step)
         cfg = OmegaConf.merge(resumed_config(saved, cfg, overrides),
                               {"paths": {"output_dir": str(out)}, "ckpt_path": str(ckpt)})
+    if isinstance(cfg.seed, bool) or not isinstance(cfg.seed, int):
+        raise InputError(f"seed must be a whole number, got {cfg.seed!r}")
     L.seed_everything(cfg.seed, workers=True, verbose=False)
     torch.set_num_threads(cfg.recipe.threads or torch.get_num_threads())
     data = LightData(cfg.recipe, cfg.data, cfg.seed, start_step)
@@ -168,6 +171,7 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
     return metrics
 
 
+@command_line
 @hydra.main(version_base="1.3", config_path="pkg://unps.conf", config_name="train")
 @exit_on_bad_input
 def main(cfg: DictConfig) -> None:

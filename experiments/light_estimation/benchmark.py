@@ -41,7 +41,7 @@ from unps.data.subject import Subject
 from unps.errors import InputError
 from unps.lights import Lights, light_errors, with_lights
 from unps.lightnet.bins import decode_lights, encode_lights
-from unps.lightnet.estimate import FRAMINGS, estimate_lights, network_input, network_pass, paired
+from unps.lightnet.estimate import FRAMINGS, network_input, network_lights, network_pass, paired
 from unps.lightnet.materials import MaterialBank
 from unps.lightnet.rig import LAYOUTS, Camera
 from unps.lightnet.shapes import SHAPES
@@ -49,8 +49,8 @@ from unps.lightnet.symmetry import SYMMETRIES, mean_direction
 from unps.lightnet.synthesis import LightDataset
 from unps.lightnet.system import SHIPPED, batch_light_errors, build_net, load_lightnet
 from unps.metrics import light_direction_mae, normal_metrics
-from unps.lights.contour import align_to_contour
-from unps.lights.reversal import resolve_reversal
+from unps.lights.contour import ContourAlignment
+from unps.lights.reversal import ReversalTest
 from unps.solvers.rpca import robust_init
 
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
@@ -68,8 +68,8 @@ def diligent(data: Path, checkpoint, quantization: str = "auto"):
             print(f"{name:<6} skipped: {e}")
             continue
         one_pass, averaged, lights = passes(subject, checkpoint)
-        tested, normals = resolve_reversal(subject, lights)
-        aligned = align_to_contour(subject, tested, normals)
+        tested, _ = ReversalTest()(subject, lights)
+        aligned, _ = ContourAlignment()(subject, tested)
         errors = light_errors(lights, subject)
         est = robust_init(with_lights(subject, tested), tested.directions)
         est_aligned = robust_init(with_lights(subject, aligned), aligned.directions)
@@ -88,7 +88,7 @@ def diligent(data: Path, checkpoint, quantization: str = "auto"):
 def passes(subject: Subject, checkpoint) -> tuple[Lights, Lights, Lights]:
     """The network's lights in one pass, averaged over the eight symmetries, and averaged as
     ``light=estimated`` does by default; none reversal-tested or aligned."""
-    network = lambda **how: estimate_lights(subject, checkpoint, reversal=None, align=None, **how)  # noqa: E731
+    network = lambda **how: network_lights(subject, checkpoint, **how)[0]  # noqa: E731
     return (network(symmetric=False, framings=[1.0]), network(symmetric=True, framings=[1.0]),
             network())
 
@@ -110,7 +110,7 @@ def sparse(data: Path, checkpoint, counts=(16, 12, 8), draws: int = 5):
             errors = []
             for _ in range(draws):
                 subset = subject.select(np.sort(rng.choice(subject.n_images, count, replace=False)))
-                lights = estimate_lights(subset, checkpoint, reversal=None, align=None)
+                lights, _ = network_lights(subset, checkpoint)
                 errors.append(light_errors(lights, subset)["light_dir_mae"])
             cells.append(f"{np.mean(errors):5.2f} ± {np.std(errors):4.2f}°")
         print(f"{name:<42} " + "   ".join(cells), flush=True)
@@ -126,8 +126,8 @@ def renders(names: list[str], checkpoint):
         for name in names:
             subject = instantiate(compose("fit", overrides=[f"subject={name}"]).subject, _partial_=True)()
             one_pass, averaged, lights = passes(subject, checkpoint)
-            tested, normals = resolve_reversal(subject, lights)
-            aligned = align_to_contour(subject, tested, normals)
+            tested, _ = ReversalTest()(subject, lights)
+            aligned, _ = ContourAlignment()(subject, tested)
             print(f"{name:<25} {light_errors(one_pass, subject)['light_dir_mae']:>15.2f}° "
                   f"{light_errors(averaged, subject)['light_dir_mae']:>14.2f}° "
                   f"{light_errors(lights, subject)['light_dir_mae']:>16.2f}° "
@@ -153,7 +153,7 @@ def synthetic(net, config, families: dict, samples: int):
 
 def score(net, ds: LightDataset, label: str) -> None:
     """Direction MAE and intensity error of the network, and the direction MAE after the
-    cast-shadow reversal test (:func:`unps.lights.reversal.resolve_reversal`)."""
+    cast-shadow reversal test (:class:`unps.lights.reversal.ReversalTest`)."""
     maes, errs, tested = [], [], []
     for i in range(0, len(ds), 8):
         batch = torch.utils.data.default_collate([ds[j] for j in range(i, min(i + 8, len(ds)))])
@@ -165,7 +165,7 @@ def score(net, ds: LightDataset, label: str) -> None:
                 batch["images"], batch["mask"], d, e, batch["directions"]):
             subject = Subject("held-out", images.permute(0, 2, 3, 1).numpy(), mask[0].numpy() > 0.5)
             lights = Lights(directions.numpy(), intensities[:, None].repeat(1, 3).numpy(), "estimated")
-            tested.append(light_direction_mae(resolve_reversal(subject, lights)[0].directions, truth.numpy()))
+            tested.append(light_direction_mae(ReversalTest()(subject, lights)[0].directions, truth.numpy()))
     print(f"{label:<60} {torch.cat(maes).mean():>7.2f}° {torch.cat(errs).mean():>9.3f} "
           f"{np.mean(tested):>16.2f}°", flush=True)
 
@@ -267,9 +267,10 @@ def families(data: Path, merl_dir: Path | None) -> dict:
     data is present."""
     banks = {"analytic": MaterialBank(), "measured": MaterialBank(analytic=0, measured=1)}
     if (data / "merl_nbrdf").is_dir():
-        banks["neural"] = MaterialBank(analytic=0, neural_dir=str(data / "merl_nbrdf"), neural=1)
+        banks["neural"] = MaterialBank(analytic=0, neural_dir=str(data / "merl_nbrdf"), neural=1,
+                                        exclude=frozenset())
     if merl_dir:
-        banks["merl"] = MaterialBank(analytic=0, merl_dir=str(merl_dir), merl=1)
+        banks["merl"] = MaterialBank(analytic=0, merl_dir=str(merl_dir), merl=1, exclude=frozenset())
     return banks
 
 

@@ -9,7 +9,7 @@ instead of Mitsuba, so neither the glaze nor the interreflections of the Vase's 
 1. The Vase subject's ground-truth normals, depth and mask, framed as the network sees a capture.
    If the error stays, the shape is what the network has not learned.
 2. Jars drawn as the ``jar`` family draws them (:func:`unps.lightnet.lathe.jar_view`), with the
-   Vase's outline (:func:`unps.synthetic.shapes.vase_profile`) and height, tilted as the Vase is
+   Vase's outline (:func:`unps.synthetic.vessels.vase_profile`) and height, tilted as the Vase is
    (its 50° toward the camera: 40° from looking into its mouth) or more or less: with a wall,
    whose lip shows as a ring, and as one sheet, whose mouth is a sharp edge as the Vase's mesh's.
 
@@ -38,12 +38,12 @@ from unps.lightnet.symmetry import SYMMETRIES, mean_direction
 from unps.lightnet.synthesis import LightDataset
 from unps.lightnet.system import load_lightnet
 from unps.metrics import light_direction_mae
-from unps.synthetic.shapes import vase_profile
+from unps.synthetic.vessels import vase_profile
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from concave_failures import render  # noqa: E402
 
-VASE_HEIGHT, VASE_TILT_DEG = 1.5, 50.0      # unps/conf/subject/Vase.yaml, unps.synthetic.shapes.vase
+VASE_HEIGHT, VASE_TILT_DEG = 1.5, 50.0      # unps/conf/subject/Vase.yaml, unps.synthetic.vessels.vase
 
 
 def subject_maps(subject, resolution: int) -> ShapeMaps:

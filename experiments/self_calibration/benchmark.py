@@ -33,8 +33,8 @@ from unps.data.diligent import read_diligent_object
 from unps.errors import InputError
 from unps.lightnet.estimate import FRAMINGS, checked_framings, network_estimate
 from unps.lights import Lights, light_errors, with_lights
-from unps.lights.contour import align_to_contour
-from unps.lights.reversal import resolve_reversal
+from unps.lights.contour import ContourAlignment
+from unps.lights.reversal import ReversalTest
 from unps.lights.selfcal import SelfCalibration, self_calibrate
 from unps.metrics import normal_metrics
 from unps.solvers.rpca import robust_init
@@ -86,10 +86,10 @@ def compare(names, data: Path, settings: SelfCalibration, symmetric: bool = True
         truth = Lights(subject.light_directions, subject.light_intensities, "gt")
         network = network_estimate(subject, None, soft_decode=True, symmetric=symmetric,
                                    framings=framings)
-        tested, normals = resolve_reversal(subject, network)
-        contour = align_to_contour(subject, tested, normals) if align else tested
+        tested, _ = ReversalTest()(subject, network)
+        contour = ContourAlignment()(subject, tested)[0] if align else tested
         start = time.perf_counter()
-        selfcal = self_calibrate(subject, contour, settings)
+        selfcal, _ = self_calibrate(subject, contour, settings)
         runtime = time.perf_counter() - start
         stages = (network, contour, selfcal)
         directions = [light_errors(lights, subject)["light_dir_mae"] for lights in (network, tested,
@@ -121,7 +121,7 @@ def perturbation(names, data: Path, settings: SelfCalibration, seed: int) -> Non
         row = ""
         for rotation, jitter in cases:
             start = Lights(perturbed(subject.light_directions, rotation, jitter, seed), None, "perturbed")
-            end = self_calibrate(subject, start, settings)
+            end, _ = self_calibrate(subject, start, settings)
             row += (f"{light_errors(start, subject)['light_dir_mae']:>13.2f}° → "
                     f"{light_errors(end, subject)['light_dir_mae']:>5.2f}°")
         print(f"{name:<10}{row}", flush=True)

@@ -51,7 +51,7 @@ def profile(subject: str, overrides: list[str], out: Path) -> dict:
     """Fit one subject and return its stage seconds, steps, wall time and normal MAE."""
     from hydra import compose, initialize_config_module
 
-    from unps.fit import fit
+    from unps.pipeline import fit
 
     run_dir = out / subject
     shutil.rmtree(run_dir, ignore_errors=True)

@@ -30,7 +30,7 @@ from unps.data.diligent import read_diligent
 from unps.data.prepare import prepare
 from unps.io.images import write_png8
 from unps.metrics import normal_metrics
-from unps.render import preview
+from unps.io.pictures import image_strip
 from unps.solvers.nayar import nayar
 from unps.solvers.rpca import robust_init
 from unps.solvers.woodham import woodham
@@ -81,7 +81,7 @@ def main():
               f"{errors[2]:>7.2f}",
               flush=True)
         rows.append((name, errors[0]))
-        strips.append(preview(subject, count=3))
+        strips.append(image_strip(subject.observed_images(), subject.mask, subject.normals, count=3))
     if args.sheet:
         write_png8(args.sheet, np.concatenate(strips, axis=0))
         print(f"contact sheet: {args.sheet}")

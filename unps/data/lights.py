@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -12,6 +12,41 @@ from unps.errors import InputError
 log = logging.getLogger(__name__)
 
 UNIT_TOLERANCE = 1e-3
+
+
+OUTCOMES = ("changed", "kept", "declined")
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """What one light stage did with the lights it was given.
+
+    Attributes:
+        stage: the stage's name (``network``, ``reversal``, ``contour``, ``selfcal``).
+        outcome: ``changed`` (it returned other lights), ``kept`` (its evidence says the lights
+            stand as they are) or ``declined`` (it could not decide, or its result failed its own
+            check, so the lights pass through unchanged).
+        reason: one sentence, for the log and ``metrics.json``.
+        evidence: the figures the decision rests on, by name.
+        errors: ``light_dir_mae`` and ``light_int_err`` of the lights after the stage, where the
+            subject's true lights are known (filled in by the runner, never used to decide).
+    """
+
+    stage: str
+    outcome: str
+    reason: str
+    evidence: dict[str, float] = field(default_factory=dict)
+    errors: dict[str, float] = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.outcome not in OUTCOMES:
+            raise ValueError(f"a stage's outcome is one of {OUTCOMES}, got {self.outcome!r}")
+
+    def to_dict(self) -> dict:
+        """A JSON-ready record: stage, outcome, reason, evidence and errors."""
+        return {"stage": self.stage, "outcome": self.outcome, "reason": self.reason,
+                "evidence": {k: float(v) for k, v in self.evidence.items()},
+                **{k: float(v) for k, v in self.errors.items()}}
 
 
 @dataclass(frozen=True)
@@ -25,12 +60,14 @@ class Lights:
         spread_deg: (n,) how far the light network's estimates of each light disagree under the
             symmetries of the image (:mod:`unps.lightnet.symmetry`), in degrees; None when not
             estimated that way.
+        verdicts: what each light stage that made them did, in order.
     """
 
     directions: np.ndarray
     intensities: np.ndarray | None
     source: str
     spread_deg: np.ndarray | None = None
+    verdicts: tuple[Verdict, ...] = ()
 
 
 def check_light_directions(directions, n_images: int, source: str) -> np.ndarray:

@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from unps.data.subject import Subject
-from unps.errors import Diverged, InputError
+from unps.errors import Diverged, InputError, Interrupted
 
 if TYPE_CHECKING:
     from unps.inverse.system import InverseRendering, Schedule
@@ -80,6 +80,10 @@ def train(system: InverseRendering, schedule: Schedule, output_dir: str | Path |
             for message in LIGHTNING_NOISE:
                 warnings.filterwarnings("ignore", message=message)
             trainer.fit(system, ckpt_path=ckpt_path)
+    except SystemExit:                      # Lightning's answer to Ctrl-C
+        if not trainer.interrupted:
+            raise
+        raise Interrupted(interruption(trainer.global_step, schedule, output_dir)) from None
     except Diverged as e:
         kept = (f"; the last good state (step {schedule.update_every}·k) is kept in "
                 f"{Path(output_dir) / 'checkpoints' / 'last.ckpt'}" if output_dir is not None else "")
@@ -90,14 +94,17 @@ def train(system: InverseRendering, schedule: Schedule, output_dir: str | Path |
     return time.perf_counter() - start, resumed_from
 
 
-def rng_state(device: torch.device) -> dict:
-    """The generators behind the input noise and the image and pixel draws: a resumed fit
-    continues exactly as the uninterrupted one would have."""
-    return {"cpu": torch.get_rng_state(),
-            "cuda": torch.cuda.get_rng_state(device) if device.type == "cuda" else None}
+def interruption(step: int, schedule: Schedule, output_dir: str | Path | None) -> str:
+    """What to tell a user who stopped a fit at ``step``.
 
-
-def restore_rng(state: dict, device: torch.device) -> None:
-    torch.set_rng_state(state["cpu"])
-    if state["cuda"] is not None and device.type == "cuda":
-        torch.cuda.set_rng_state(state["cuda"], device)
+    >>> from unps.inverse.system import Schedule
+    >>> interruption(237, Schedule(steps=1000, update_every=100), "run")
+    'interrupted at step 237 of 1000: the same command resumes from the checkpoint of step 200 in run/checkpoints'
+    >>> interruption(50, Schedule(steps=1000, update_every=100), None)
+    'interrupted at step 50 of 1000: the same command starts the fit again'
+    """
+    saved = step // schedule.update_every * schedule.update_every
+    if output_dir is None or saved == 0:
+        return f"interrupted at step {step} of {schedule.steps}: the same command starts the fit again"
+    return (f"interrupted at step {step} of {schedule.steps}: the same command resumes from the "
+            f"checkpoint of step {saved} in {Path(output_dir) / 'checkpoints'}")

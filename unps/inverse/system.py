@@ -21,8 +21,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from unps.errors import Diverged
-from unps.inverse.control import restore_rng, rng_state
+from unps.errors import Diverged, InputError
+from unps.inverse.rng import restore_rng, rng_state
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet, normal_net_input, shading, specular_map
 from unps.timing import Span, stage
@@ -57,6 +57,28 @@ class Schedule:
     prior_weight: float = 0.1
     prior_steps: int = 50
     update_every: int = 100
+
+    def __post_init__(self):
+        whole = {"steps": 1, "update_every": 1, "lr_drop_at": 0, "prior_steps": 0}
+        for name, least in whole.items():
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < least:
+                raise InputError(f"preset.{name} must be a whole number >= {least}, got {value!r}")
+        if self.images_per_step is not None and (not isinstance(self.images_per_step, int)
+                                                 or self.images_per_step < 1):
+            raise InputError(f"preset.images_per_step must be a whole number >= 1 or null (all "
+                             f"images), got {self.images_per_step!r}")
+        positive = {"lr": self.lr, "normal_lr": self.normal_lr, "pixel_keep": self.pixel_keep}
+        for name, value in positive.items():
+            if value is not None and not (isinstance(value, (int, float)) and value > 0):
+                raise InputError(f"preset.{name} must be a number > 0, got {value!r}")
+        if self.pixel_keep > 1:
+            raise InputError(f"preset.pixel_keep is a share of the object's pixels, in (0, 1]; got "
+                             f"{self.pixel_keep}")
+        for name in ("input_noise_var", "prior_weight"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and value >= 0):
+                raise InputError(f"preset.{name} must be a number >= 0, got {value!r}")
 
 
 class InverseRendering(L.LightningModule):

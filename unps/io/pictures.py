@@ -32,6 +32,25 @@ def normal_rgb(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return (rgb * mask[..., None]).astype(np.uint8)
 
 
+def image_strip(observed: np.ndarray, mask: np.ndarray, normals: np.ndarray | None = None,
+                count: int = 7) -> np.ndarray:
+    """A strip of ``count`` evenly spaced images (tone-mapped for display) and the normals.
+
+    Args:
+        observed: (n, H, W, 3) captured images; mask (H, W) bool; normals (H, W, 3) or None.
+
+    Returns:
+        (H, (count + 1)·W, 3) uint8 (count·W without normals).
+    """
+    picks = np.linspace(0, len(observed) - 1, min(count, len(observed))).astype(int)
+    peak = np.percentile(observed[picks][:, mask], 99.5)
+    shown = (np.clip(observed[picks] / peak, 0, 1) ** (1 / 2.2) * 255).round().astype(np.uint8)
+    tiles = list(shown)
+    if normals is not None:
+        tiles.append(normal_rgb(normals, mask))
+    return np.concatenate(tiles, axis=1)
+
+
 def albedo_rgb(albedo: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, float]:
     """Albedo divided by its maximum over the mask (nothing clipped); returns the image and the scale."""
     scale = float(albedo[mask].max()) if mask.any() else 1.0

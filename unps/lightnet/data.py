@@ -7,7 +7,7 @@ from torch.utils.data import DataLoader
 
 from unps.lightnet.materials import MaterialBank
 from unps.lightnet.rig import Camera
-from unps.lightnet.shapes import mesh_views
+from unps.lightnet.meshes import mesh_views
 from unps.lightnet.synthesis import LightDataset
 
 VALIDATION_SEED_OFFSET = 1_000_003   # validation stacks never share a (seed, index) with training

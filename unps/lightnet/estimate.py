@@ -1,8 +1,7 @@
-"""Estimating a subject's lights with the trained network (``light=estimated``)."""
+"""The trained network's estimate of a subject's lights: the first stage of ``light=estimated``."""
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 from collections.abc import Sequence
 
@@ -10,16 +9,13 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from unps.data.lights import Verdict
 from unps.data.subject import Subject
 from unps.errors import InputError
 from unps.lightnet.bins import decode_lights
 from unps.lightnet.symmetry import SYMMETRIES, frame_matrix, mean_direction, transform_images
 from unps.lightnet.system import load_lightnet
-from unps.lights import Lights, light_errors
-from unps.lights.contour import align_to_contour
-from unps.lights.reversal import resolve_reversal
-from unps.lights.selfcal import SelfCalibration, self_calibrate
-from unps.timing import stage
+from unps.lights import Lights
 
 log = logging.getLogger(__name__)
 
@@ -66,11 +62,10 @@ def network_input(images: np.ndarray, mask: np.ndarray, resolution: int, fill: f
     return x[None], (m > 0.5).float()
 
 
-def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode: bool = True,
-                    symmetric: bool = True, framings: Sequence[float] = FRAMINGS,
-                    reversal: str | None = "shadows", align: str | None = None,
-                    selfcal: SelfCalibration | None = None) -> Lights:
-    """Directions and relative intensities of every image, from the captured images alone.
+def network_lights(subject: Subject, checkpoint: str | None = None, soft_decode: bool = True,
+                   symmetric: bool = True, framings: Sequence[float] = FRAMINGS) -> tuple[Lights, Verdict]:
+    """Directions and relative intensities of every image from the captured images alone: the
+    first light stage of ``light=estimated`` (the others: :mod:`unps.lights.stages`).
 
     Args:
         subject: its captured images (``observed_images()``) are used; known lights are not.
@@ -82,48 +77,25 @@ def estimate_lights(subject: Subject, checkpoint: str | None = None, soft_decode
         framings: how much of the network's square input the object fills (:func:`network_input`;
             beyond the paper), taken in turn with the symmetries (:func:`paired`) and averaged:
             the network is not scale-invariant, and its estimates at nearby scales err apart.
-        reversal: ``"shadows"`` turns the network's directions half a turn about the view axis
-            when the shadows they cast over the reversed surface match the images better
-            (:func:`unps.lights.reversal.resolve_reversal`; beyond the paper), None keeps them.
-        align: ``"contour"`` rotates the network's directions so that the occluding contour's
-            normals face sideways (:func:`unps.lights.contour.align_to_contour`; beyond the
-            paper), None keeps them as the network gave them.
-        selfcal: settings of the self-calibration that then fits the lights to the images
-            (:func:`unps.lights.selfcal.self_calibrate`; beyond the paper), None skips it.
 
     Raises:
-        InputError: another ``reversal`` or ``align``; no ``framings``, or one outside (0, 1].
+        InputError: no ``framings``, or one outside (0, 1].
 
     Returns:
         Lights with (n, 3) unit directions and (n, 3) intensities (one value per image,
-        repeated for RGB; mean 1 over the images), and the network's ``spread_deg``.
+        repeated for RGB; mean 1 over the images) and the network's ``spread_deg``; and the
+        network's verdict (``changed``: it replaces whatever lights the subject had).
     """
-    if reversal not in (None, "shadows"):
-        raise InputError(f"light.reversal must be shadows or null, got {reversal!r}")
-    if align not in (None, "contour"):
-        raise InputError(f"light.align must be contour or null, got {align!r}")
     framings = checked_framings(framings)
-    with stage("light network"):
-        lights = network_estimate(subject, checkpoint, soft_decode, symmetric, framings)
-    log_stage(f"network ({checkpoint or 'shipped weights'}, {describe_passes(symmetric, framings)})",
-              lights, subject)
-    spread = lights.spread_deg
-    if spread is not None:
-        warn_if_uncertain(spread)
-    normals = None          # the robust initialisation's with the lights, shared by the next two
-    if reversal == "shadows":
-        with stage("reversal test"):
-            lights, normals = resolve_reversal(subject, lights)
-        log_stage("reversal test", lights, subject)
-    if align == "contour":
-        with stage("contour alignment"):
-            lights = align_to_contour(subject, lights, normals)
-        log_stage("contour alignment", lights, subject)
-    if selfcal is not None:
-        with stage("self-calibration"):
-            lights = self_calibrate(subject, lights, selfcal)
-        log_stage("self-calibration", lights, subject)
-    return dataclasses.replace(lights, spread_deg=spread)
+    lights = network_estimate(subject, checkpoint, soft_decode, symmetric, framings)
+    passes = describe_passes(symmetric, framings)
+    evidence = {}
+    if lights.spread_deg is not None:
+        warn_if_uncertain(lights.spread_deg)
+        evidence = {"spread_median_deg": float(np.median(lights.spread_deg)),
+                    "spread_max_deg": float(lights.spread_deg.max())}
+    return lights, Verdict("network", "changed", f"{checkpoint or 'shipped weights'}, {passes}",
+                           evidence)
 
 
 def checked_framings(framings: Sequence[float] | float) -> tuple[float, ...]:
@@ -233,12 +205,3 @@ def paired(framings: Sequence[float], frames: Sequence) -> list[tuple[float, obj
     """
     count = max(len(framings), len(frames))
     return [(framings[k % len(framings)], frames[k % len(frames)]) for k in range(count)]
-
-
-def log_stage(name: str, lights: Lights, subject: Subject) -> None:
-    """One log line per estimation stage, with its error where the subject's lights are known."""
-    errors = light_errors(lights, subject)
-    known = "".join(f", {label} {errors[key]:.{digits}f}{unit}" for key, label, digits, unit in
-                    (("light_dir_mae", "direction error", 2, "°"),
-                     ("light_int_err", "intensity error", 3, "")) if key in errors)
-    log.info("lights of %d images after %s%s", subject.n_images, name, known)

@@ -64,6 +64,25 @@ def painted(resolution: int, generator: torch.Generator) -> torch.Tensor:
     return albedo
 
 
+HELD_OUT_MERL = frozenset({
+    "alumina-oxide", "aventurnine", "black-fabric", "black-oxidized-steel", "black-soft-plastic",
+    "blue-fabric", "blue-metallic-paint2", "brass", "chrome-steel", "colonial-maple-223",
+    "color-changing-paint2", "dark-blue-paint", "dark-specular-fabric", "fruitwood-241",
+    "gold-metallic-paint2", "gold-paint", "grease-covered-steel", "green-fabric",
+    "green-metallic-paint", "green-plastic", "ipswich-pine-221", "light-red-paint", "natural-209",
+    "nickel", "orange-paint", "pickled-oak-260", "pink-fabric2", "pink-jasper", "polyethylene",
+    "pure-rubber", "pvc", "red-fabric2", "red-phenolic", "red-specular-plastic",
+    "silver-metallic-paint", "silver-paint", "specular-black-phenolic", "specular-green-phenolic",
+    "specular-orange-phenolic", "specular-violet-phenolic", "specular-yellow-phenolic", "steel",
+    "tungsten-carbide", "two-layer-silver", "violet-rubber", "white-diffuse-bball", "white-fabric2",
+    "white-paint", "yellow-paint", "yellow-plastic",
+})
+"""The MERL materials kept for the light benchmark (``experiments/light_benchmark``): every second
+name in alphabetical order, dark glossy metals, plastics and matte paints among them. The
+training mix never draws them (:class:`MaterialBank` leaves their files out); the shipped
+weights were trained on no MERL material at all."""
+
+
 FAMILIES = ("analytic", "merl", "neural", "measured")   # a sample's ``family`` is its index here
 DRAWN = {"analytic": random_analytic, "measured": random_measured}   # the families made, not read
 
@@ -78,10 +97,13 @@ class MaterialBank:
             (:func:`~unps.lightnet.brdf.random_measured`; no data needed).
         merl_dir, merl: a folder of ``.binary`` files and its weight.
         neural_dir, neural: a folder of neural fits (``.h5``) and its weight.
+        exclude: names of materials whose files are never drawn; default: the benchmark's
+            (:data:`HELD_OUT_MERL`), so that training never sees them.
     """
 
     def __init__(self, analytic: float = 1.0, measured: float = 0.0, merl_dir: str | None = None,
-                 merl: float = 0.0, neural_dir: str | None = None, neural: float = 0.0):
+                 merl: float = 0.0, neural_dir: str | None = None, neural: float = 0.0,
+                 exclude: frozenset[str] = HELD_OUT_MERL):
         self.families, self.weights = ["analytic"], [analytic]
         if measured > 0:
             self.families.append("measured")
@@ -93,9 +115,11 @@ class MaterialBank:
                 if not folder or not Path(folder).expanduser().is_dir():
                     raise InputError(f"materials: {family} has weight {weight} but its folder "
                                      f"{folder!r} does not exist")
-                files = sorted(Path(folder).expanduser().glob(f"*{suffix}"))
+                files = sorted(p for p in Path(folder).expanduser().glob(f"*{suffix}")
+                               if p.stem not in exclude)
                 if not files:
-                    raise InputError(f"{folder}: no {suffix} files")
+                    raise InputError(f"{folder}: no {suffix} files (those of the light benchmark's "
+                                     f"materials, unps.lightnet.materials.HELD_OUT_MERL, are left out)")
                 self.files[family] = files
                 self.families.append(family)
                 self.weights.append(weight)

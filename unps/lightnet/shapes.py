@@ -1,5 +1,5 @@
 """Scenes for the light network's training data: shapes as normal and depth maps, in six
-families (:data:`SHAPES`) or from meshes, and the shadows they cast.
+families (:data:`SHAPES`; meshes: :mod:`unps.lightnet.meshes`), and the shadows they cast.
 
 Frame: x right, y up, z toward the camera; the orthographic view covers [−1, 1]², so one
 pixel is 2 / resolution units and depth is in the same units.
@@ -9,11 +9,8 @@ from __future__ import annotations
 
 import hashlib
 import math
-import os
 from dataclasses import dataclass
-from pathlib import Path
 
-import numpy as np
 import torch
 import torch.nn.functional as F
 
@@ -232,34 +229,6 @@ def maps_from_depth(z: torch.Tensor, mask: torch.Tensor) -> ShapeMaps:
     dz_dy_rows, dz_dx = torch.gradient(z, spacing=pitch)
     normals = F.normalize(torch.stack([-dz_dx, dz_dy_rows, torch.ones_like(z)], -1), dim=-1)
     return ShapeMaps(normals * mask[..., None], torch.where(mask, z, torch.zeros_like(z)), mask)
-
-
-def mesh_views(folder: str | os.PathLike, resolution: int, views: int, seed: int) -> list[ShapeMaps]:
-    """Normal and depth maps of every mesh in a folder (.obj, .ply) from random directions."""
-    import trimesh
-
-    from unps.synthetic.render import render_ground_truth
-    from unps.synthetic.shapes import Mesh, fit_to_view
-
-    files = sorted(p for p in Path(folder).expanduser().iterdir()
-                   if p.suffix.lower() in (".obj", ".ply"))
-    if not files:
-        raise InputError(f"{folder}: no .obj or .ply meshes for the light network's training data")
-    rng = np.random.default_rng(seed)
-    out = []
-    for path in files:
-        loaded = trimesh.load(path, force="mesh", process=False)
-        vertices = np.asarray(loaded.vertices, np.float64)
-        vertices -= vertices.mean(0)
-        for _ in range(views):
-            rotation = trimesh.transformations.random_rotation_matrix(rand=rng.random(3))[:3, :3]
-            mesh = fit_to_view(Mesh((vertices @ rotation.T).astype(np.float32),
-                                    np.asarray(loaded.faces, np.int32)), extent=0.9)
-            normals, depth, mask = render_ground_truth(mesh, resolution)
-            depth = np.where(mask, depth * 2 / resolution, 0)       # pixels → view units
-            out.append(ShapeMaps(torch.as_tensor(normals), torch.as_tensor(depth, dtype=torch.float32),
-                                 torch.as_tensor(mask)))
-    return out
 
 
 def cast_shadows(maps: ShapeMaps, lights: torch.Tensor, steps: int = 24) -> torch.Tensor:

@@ -6,24 +6,25 @@ global rotation error passes straight into the normals. On the object's outline,
 surface turns away from the camera: the true normals there are perpendicular to the view axis
 and point outward, across the outline. :func:`contour_rotation` finds the R that best turns
 the normals estimated with the lights onto those directions (Kabsch), and
-:func:`align_to_contour` applies it to the lights.
+:class:`ContourAlignment` applies it to the lights.
 
 Frame: x right (+col), y up (−row), z toward the camera.
 """
 
 from __future__ import annotations
 
-import logging
+import dataclasses
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from scipy.ndimage import binary_erosion, gaussian_filter
 
+from unps.data.lights import Verdict
 from unps.data.subject import Subject
 from unps.lights import Lights, with_lights
 from unps.metrics import angular_error
 from unps.solvers.rpca import robust_init
-
-log = logging.getLogger(__name__)
 
 MIN_CONTOUR_PIXELS = 50
 MAX_CONTOUR_MISFIT = 45.0   # degrees: median angle left on the contour after the best rotation
@@ -95,46 +96,46 @@ def rotation_angle(rotation: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip((np.trace(rotation) - 1) / 2, -1, 1))))
 
 
-def align_to_contour(subject: Subject, lights: Lights, normals: np.ndarray | None = None) -> Lights:
-    """Estimated lights rotated so that the robust initialisation's normals with them face
-    outward on the occluding contour.
+@dataclass(frozen=True)
+class ContourAlignment:
+    """The light stage that rotates estimated lights so that the robust initialisation's normals
+    with them face outward on the occluding contour (off by default: on DiLiGenT's cat it turned
+    a good estimate by 17.6°, ``experiments/light_estimation/README.md``).
 
-    Args:
-        subject: its captured images and mask.
-        lights: estimated directions and intensities.
-        normals: (H, W, 3) the robust initialisation's normals with ``lights``; computed when
-            None.
+    Rotations under ``min_rotation`` are left undone: on DiLiGenT's ground-truth normals the
+    contour itself asks for up to 4.8° (cat), since its band is not everywhere an occluding
+    contour, so smaller rotations are as likely to be its error as the network's. Nor is one over
+    ``max_rotation`` applied: the broken rim of BrokenPot, no occluding contour, asks to turn
+    lights that cast shadows have put right by 179°.
 
-    Returns:
-        The lights with every direction rotated by :func:`contour_rotation` (intensities
-        unchanged), or as given when that finds no rotation it can trust, or one under
-        ``MIN_ROTATION``: on DiLiGenT's ground-truth normals the contour itself asks for up to
-        4.8° (cat), since its band is not everywhere an occluding contour, so smaller rotations
-        are as likely to be its error as the network's. Measured on the Face, the rotation of
-        2.9° it asks for costs the fit 0.3–0.6°. Nor is one over ``MAX_ROTATION`` applied: the
-        largest the network's bias has needed is 17.6° (cat), while the broken rim of BrokenPot,
-        no occluding contour, asks to turn lights that cast shadows have put right by 179°
-        (:mod:`unps.lights.reversal`).
+    Attributes:
+        min_rotation, max_rotation: degrees.
     """
-    if normals is None:
+
+    name: ClassVar[str] = "contour"
+    min_rotation: float = MIN_ROTATION
+    max_rotation: float = MAX_ROTATION
+
+    def __call__(self, subject: Subject, lights: Lights) -> tuple[Lights, Verdict]:
+        """The lights with every direction rotated by :func:`contour_rotation` (intensities
+        unchanged), or as given when that finds no rotation it can trust; and the verdict."""
         normals = robust_init(with_lights(subject, lights), lights.directions).normals
-    rotation, basis = contour_rotation(normals, subject.mask)
-    if rotation is None:
-        log.warning("subject %r: %s; the estimated lights are used as they are", subject.name, basis)
-        return lights
-    if rotation_angle(rotation) > MAX_ROTATION:
-        log.warning("subject %r: the occluding contour asks for a rotation of %.1f° of the estimated "
-                    "lights, more than the %.0f° it is trusted to correct; the "
-                    "outline is unlikely to be an occluding contour (%s), and the lights are used "
-                    "as they are", subject.name, rotation_angle(rotation), MAX_ROTATION, basis)
-        return lights
-    if rotation_angle(rotation) < MIN_ROTATION:
-        log.info("the occluding contour asks for a rotation of %.2f° of the estimated lights, under "
-                 "the %.0f° that the contour can tell apart; the lights are used as they are (%s)",
-                 rotation_angle(rotation), MIN_ROTATION, basis)
-        return lights
-    directions = (lights.directions.astype(np.float64) @ rotation.T).astype(np.float32)
-    log.info("aligned the estimated lights to the occluding contour: a rotation of %.2f° "
-             "(lights moved by %.2f° on average; %s)", rotation_angle(rotation),
-             float(angular_error(directions, lights.directions).mean()), basis)
-    return Lights(directions, lights.intensities, lights.source)
+        rotation, basis = contour_rotation(normals, subject.mask)
+        if rotation is None:
+            return lights, Verdict(self.name, "declined", basis)
+        angle = rotation_angle(rotation)
+        evidence = {"rotation_deg": angle}
+        if angle > self.max_rotation:
+            return lights, Verdict(self.name, "declined", f"the occluding contour asks for a rotation "
+                                   f"of {angle:.1f}°, more than the {self.max_rotation:.0f}° it is "
+                                   f"trusted to correct: the outline is unlikely to be an occluding "
+                                   f"contour ({basis})", evidence)
+        if angle < self.min_rotation:
+            return lights, Verdict(self.name, "kept", f"the occluding contour asks for a rotation of "
+                                   f"{angle:.2f}°, under the {self.min_rotation:.0f}° it can tell "
+                                   f"apart ({basis})", evidence)
+        directions = (lights.directions.astype(np.float64) @ rotation.T).astype(np.float32)
+        moved = float(angular_error(directions, lights.directions).mean())
+        return dataclasses.replace(lights, directions=directions), Verdict(
+            self.name, "changed", f"rotated the lights by {angle:.2f}° to the occluding contour "
+            f"(moved by {moved:.2f}° on average; {basis})", evidence)

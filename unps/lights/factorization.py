@@ -40,6 +40,21 @@ def aligned_factorization(gray: np.ndarray, directions: np.ndarray, rank: int = 
     return normals, lights
 
 
+def held_factorization(gray: np.ndarray, scaled_lights: np.ndarray, rank: int = 3) -> np.ndarray:
+    """The scaled normals that best explain the low-rank part of the image matrix under lights
+    held as given.
+
+    Args:
+        gray: (m, n) pixel × image brightness.
+        scaled_lights: (n, 3) directions × relative intensities.
+
+    Returns:
+        (m, 3) scaled normals B with B·Sᵀ nearest the low-rank part in least squares.
+    """
+    low_rank = partial_sum_rpca(gray, rank).low_rank
+    return np.linalg.lstsq(np.asarray(scaled_lights, np.float64), low_rank.T, rcond=None)[0].T
+
+
 def parallel_transform(lights: np.ndarray, directions: np.ndarray) -> np.ndarray:
     """The 3×3 T (scaled to a mean |s_i T| of 1) that makes each row s_i T most nearly parallel to
     d_i: the least-squares solution of (I − d_i d_iᵀ)·Tᵀ s_i = 0, with the sign that points the

@@ -11,8 +11,9 @@ where a dome casts no shadow at all.
 :func:`shadow_evidence` reads both ways from the robust initialisation's normals: it integrates the
 depth, casts each light's shadows over z and over −z, and counts how often the pixels that only
 one reading puts in shadow are dark in the images, where the shading with the lights
-says they should be lit. :func:`resolve_reversal` turns the lights when those counts make the
-reversed reading far more likely (:attr:`ShadowEvidence.log_odds`).
+says they should be lit. :class:`ReversalTest` turns the lights only on positive evidence: the
+reversed reading's own shadows are dark far more often than lit pixels are and than the current
+reading's shadows are.
 
 Frame: x right (+col), y up (−row), z toward the camera; orthographic view along +z.
 """
@@ -20,13 +21,16 @@ Frame: x right (+col), y up (−row), z toward the camera; orthographic view alo
 from __future__ import annotations
 
 import logging
+import dataclasses
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 import torch
 
 from unps.data.subject import Subject
 from unps.geometry import cast_shadows, integrate_normals
+from unps.data.lights import Verdict
 from unps.lights import Lights, with_lights
 from unps.solvers.rpca import robust_init
 from unps.solvers.woodham import rgb_albedo, to_maps
@@ -37,56 +41,70 @@ HALF_TURN = np.diag([-1.0, -1.0, 1.0])   # about the view axis
 LIT = 0.4            # n·l above which the shading says a pixel is lit (not grazing, where a
                      # glossy or rough material falls off faster than Lambertian)
 DARK = 0.25          # observed / Lambertian prediction below which a lit pixel counts as dark
-HIT_RATE = 0.5       # how often a pixel that the right reading puts in shadow is dark, at least
-MIN_LOG_ODDS = 100.0  # natural log of the odds for the reversal needed to turn the lights
+PRIOR_PAIRS = 5.0    # pseudo-counts that pull a small count's rate or lift toward no evidence
 
 
 @dataclass(frozen=True)
 class ShadowEvidence:
     """What the images say about the two readings, in pairs of pixel and image.
 
+    A pixel can be dark where no shadow falls (a dark or mirror-like material, a highlight
+    elsewhere): how often each pixel is dark under the lights that neither reading shadows it
+    from gives the darkness to expect of it anyway.
+
     Attributes:
         lit_pairs, dark_pairs: pairs the shading says are lit (n·l > ``LIT``), and how many of
             them are dark in the image.
         current_pairs, current_dark: pairs that only the current reading puts in shadow, and how
             many of them are dark.
-        reversed_pairs, reversed_dark: the same for the reversed reading.
+        current_expected: how many of those pairs would be dark anyway (the sum over them of each
+            pixel's dark share where neither reading casts a shadow).
+        reversed_pairs, reversed_dark, reversed_expected: the same for the reversed reading.
     """
 
     lit_pairs: int
     dark_pairs: int
     current_pairs: int
     current_dark: int
+    current_expected: float
     reversed_pairs: int
     reversed_dark: int
+    reversed_expected: float
 
     @property
-    def log_odds(self) -> float:
-        """Log-likelihood ratio of the reversed reading against the current one.
-
-        A pair that the right reading puts in shadow is dark with probability ``HIT_RATE``; one
-        that only the wrong reading puts there, as often as any lit pair (the dark share,
-        Laplace-smoothed). Pairs are counted as independent, which neighbouring pixels are not,
-        hence the high bar of ``MIN_LOG_ODDS``. 0 when the dark share reaches ``HIT_RATE``:
-        then darkness says nothing about shadows.
-        """
-        base = (self.dark_pairs + 1) / (self.lit_pairs + 2)
-        if base >= HIT_RATE:
-            return 0.0
-        dark, bright = np.log(HIT_RATE / base), np.log((1 - HIT_RATE) / (1 - base))
-        reversed_ = self.reversed_dark * dark + (self.reversed_pairs - self.reversed_dark) * bright
-        current = self.current_dark * dark + (self.current_pairs - self.current_dark) * bright
-        return float(reversed_ - current)
+    def base_rate(self) -> float:
+        """How often a lit pair is dark at all."""
+        return (self.dark_pairs + 1) / (self.lit_pairs + 2)
 
     @property
-    def favours_reversal(self) -> bool:
-        return self.log_odds > MIN_LOG_ODDS
+    def reversed_rate(self) -> float:
+        """How often the shadows that only the reversed reading casts are dark, smoothed toward
+        the base share (which it is when that reading casts none)."""
+        return (self.reversed_dark + PRIOR_PAIRS * self.base_rate) / (self.reversed_pairs + PRIOR_PAIRS)
+
+    @property
+    def current_lift(self) -> float:
+        """How many times more often the current reading's own shadows are dark than their
+        pixels are anyway (smoothed toward 1)."""
+        return (self.current_dark + PRIOR_PAIRS) / (self.current_expected + PRIOR_PAIRS)
+
+    @property
+    def reversed_lift(self) -> float:
+        """The same for the reversed reading."""
+        return (self.reversed_dark + PRIOR_PAIRS) / (self.reversed_expected + PRIOR_PAIRS)
 
     def describe(self) -> str:
         return (f"of the pairs of lit pixel and image, {self.current_pairs} are in shadow only as "
-                f"read now ({self.current_dark} of them dark), {self.reversed_pairs} only as "
-                f"reversed ({self.reversed_dark} dark), {self.dark_pairs} of all {self.lit_pairs} "
-                f"lit pairs are dark: log odds for the reversal {self.log_odds:.0f}")
+                f"read now ({self.current_dark} of them dark, {self.current_lift:.1f}× as often as "
+                f"those pixels are otherwise), {self.reversed_pairs} only as reversed "
+                f"({self.reversed_dark} dark, {100 * self.reversed_rate:.0f} %, "
+                f"{self.reversed_lift:.1f}× as often); {100 * self.base_rate:.1f} % of all "
+                f"{self.lit_pairs} lit pairs are dark")
+
+    def as_dict(self) -> dict[str, float]:
+        return {name: float(getattr(self, name)) for name in (
+            "lit_pairs", "dark_pairs", "current_pairs", "current_dark", "current_expected",
+            "reversed_pairs", "reversed_dark", "reversed_expected")}
 
 
 def shadow_evidence(subject: Subject, lights: Lights, normals: np.ndarray,
@@ -118,36 +136,72 @@ def shadow_evidence(subject: Subject, lights: Lights, normals: np.ndarray,
     turned = torch.as_tensor(directions @ HALF_TURN).float()
     reversed_ = cast_shadows(-depth, mask, turned, 1.0, steps).numpy()
     only_current, only_reversed = lit & current & ~reversed_, lit & reversed_ & ~current
-    return ShadowEvidence(int(lit.sum()), int(dark.sum()), int(only_current.sum()),
-                          int(dark[only_current].sum()), int(only_reversed.sum()),
-                          int(dark[only_reversed].sum()))
+    neither = lit & ~current & ~reversed_
+    base = (dark.sum() + 1) / (lit.sum() + 2)
+    anyway = ((dark & neither).sum(0) + PRIOR_PAIRS * base) / (neither.sum(0) + PRIOR_PAIRS)  # (H, W)
+    expected = np.broadcast_to(anyway, dark.shape)
+    return ShadowEvidence(int(lit.sum()), int(dark.sum()),
+                          int(only_current.sum()), int(dark[only_current].sum()),
+                          float(expected[only_current].sum()),
+                          int(only_reversed.sum()), int(dark[only_reversed].sum()),
+                          float(expected[only_reversed].sum()))
 
 
-def resolve_reversal(subject: Subject, lights: Lights, normals: np.ndarray | None = None
-                     ) -> tuple[Lights, np.ndarray]:
-    """The lights, or the lights half a turn about the view axis when the shadows say so.
+@dataclass(frozen=True)
+class ReversalTest:
+    """The light stage that turns the lights half a turn about the view when, and only when, the
+    shadows of the reversed reading are there in the images (positive evidence).
 
-    Args:
-        subject: its captured images and mask.
-        lights: the estimate to test.
-        normals: (H, W, 3) the robust initialisation's normals with ``lights``; computed when
-            None.
+    The shadows that only the reversed reading casts must be dark at least ``hit_rate`` of the
+    time, over at least ``min_pairs`` pairs, and ``contrast`` times as often as their pixels are
+    dark where neither reading shadows them, and as the current reading's own shadows are (their
+    lifts, :class:`ShadowEvidence`). Where neither reading's shadows are dark, nothing is said and
+    the lights stay: a reading is never turned for predicting fewer shadows (a glossy cup on a
+    thin stem, 2026-11-25, was turned that way), nor for shadows that fall where a dark or
+    mirror-like material is dark anyway.
 
-    Returns:
-        ``lights`` with directions (l_x, l_y, l_z) → (−l_x, −l_y, l_z) when
-        :attr:`ShadowEvidence.favours_reversal`, else ``lights`` itself (intensities unchanged);
-        and the normals with the lights returned (turned alike: the robust initialisation turns
-        with its lights).
+    Attributes:
+        hit_rate: share of the reversed reading's own shadow pairs that must be dark.
+        contrast: how many times more often than expected of their pixels, and than the current
+            reading's shadows, they must be dark.
+        min_pairs: pairs of pixel and image in the reversed reading's own shadows, at least.
     """
-    if normals is None:
+
+    name: ClassVar[str] = "reversal"
+    hit_rate: float = 0.4
+    contrast: float = 4.0
+    min_pairs: int = 50
+
+    def favours_reversal(self, evidence: ShadowEvidence) -> bool:
+        """Whether the evidence is positive for the reversed reading (see the class)."""
+        lift = evidence.reversed_lift
+        return (evidence.reversed_pairs >= self.min_pairs and evidence.reversed_rate >= self.hit_rate
+                and lift >= self.contrast and lift >= self.contrast * evidence.current_lift)
+
+    def __call__(self, subject: Subject, lights: Lights) -> tuple[Lights, Verdict]:
+        """The lights, or the lights half a turn about the view axis when the shadows say so.
+
+        Args:
+            subject: its captured images and mask.
+            lights: the estimate to test.
+
+        Returns:
+            ``lights`` with directions (l_x, l_y, l_z) → (−l_x, −l_y, l_z) when
+            :meth:`favours_reversal`, else ``lights`` itself (intensities unchanged); and the
+            verdict with the counts of :class:`ShadowEvidence`.
+        """
         normals = robust_init(with_lights(subject, lights), lights.directions).normals
-    evidence = shadow_evidence(subject, lights, normals)
-    if not evidence.favours_reversal:
-        log.info("cast shadows agree with the lights as estimated (%s)", evidence.describe())
-        return lights, normals
-    log.warning("cast shadows say the estimated lights read the surface inside out (concave for "
-                "convex): turned them half a turn about the view axis (%s); if the object has no "
-                "hollows that cast shadows, rerun with light.reversal=null", evidence.describe())
-    directions = (lights.directions.astype(np.float64) @ HALF_TURN).astype(np.float32)
-    turned = (normals @ HALF_TURN).astype(np.float32)
-    return Lights(directions, lights.intensities, lights.source, spread_deg=lights.spread_deg), turned
+        evidence = shadow_evidence(subject, lights, normals)
+        if not self.favours_reversal(evidence):
+            return lights, Verdict(self.name, "kept", "the cast shadows do not say the lights read "
+                                   "the surface inside out (" + evidence.describe() + ")",
+                                   evidence.as_dict())
+        log.warning("cast shadows say the estimated lights read the surface inside out (concave "
+                    "for convex): turned them half a turn about the view axis (%s); if the object "
+                    "has no hollows that cast shadows, rerun with light.stages without reversal",
+                    evidence.describe())
+        directions = (lights.directions.astype(np.float64) @ HALF_TURN).astype(np.float32)
+        turned = dataclasses.replace(lights, directions=directions)
+        return turned, Verdict(self.name, "changed", "turned the lights half a turn about the view: "
+                               "the reversed reading's shadows are dark in the images ("
+                               + evidence.describe() + ")", evidence.as_dict())

@@ -69,6 +69,8 @@ def run_fit(cfg: DictConfig, seconds: dict[str, float], warnings: list[str]) -> 
 
     from unps.pipeline.outputs import write_fit_outputs
 
+    if isinstance(cfg.seed, bool) or not isinstance(cfg.seed, int):
+        raise InputError(f"seed must be a whole number, got {cfg.seed!r}")
     seed_everything(cfg.seed, workers=True, verbose=False)
     threads, source = set_fit_threads(cfg.get("threads"), launcher_config())
     keep_freed_memory()
@@ -110,7 +112,8 @@ def run_fit(cfg: DictConfig, seconds: dict[str, float], warnings: list[str]) -> 
     if estimate.light_directions is not None:
         intensities = (lights.intensities if lights.intensities is not None
                        else np.ones_like(lights.directions)) * estimate.light_scales[:, None]
-        lights = Lights(estimate.light_directions, intensities.astype(np.float32), "refined")
+        lights = Lights(estimate.light_directions, intensities.astype(np.float32), "refined",
+                        spread_deg=lights.spread_deg, verdicts=lights.verdicts)
         light_metrics = light_errors(lights, original)
         if light_metrics:
             log.info("refined lights: %s", ", ".join(f"{k} {v:.3f}" for k, v in light_metrics.items()))
@@ -131,6 +134,8 @@ def run_fit(cfg: DictConfig, seconds: dict[str, float], warnings: list[str]) -> 
     true_lights = ground_truth(original) if lights.source != "gt" and original.calibrated else None
     if lights.spread_deg is not None:
         metrics["light_spread_deg"] = float(np.median(lights.spread_deg))
+    if lights.verdicts:
+        metrics["light_stages"] = [verdict.to_dict() for verdict in lights.verdicts]
     metrics["light_condition"] = condition if np.isfinite(condition) else None
     metrics["warnings"] = list(warnings)
     metrics["stage_seconds"] = dict(seconds)

@@ -12,7 +12,6 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 from matplotlib.path import Path as PolygonPath
-from scipy.interpolate import CubicSpline
 from scipy.spatial import cKDTree
 
 from unps.geometry import depth_to_mesh
@@ -189,33 +188,6 @@ def broken_pot(resolution: int = 320, radius: float = 0.9, pieces: int = 9,
     inside = PolygonPath(np.stack([px, py], 1)).contains_points(
         np.stack([x.ravel(), y.ravel()], 1)).reshape(x.shape)
     return height_field_mesh(z, inside & (rho < 0.985 * radius))
-
-
-def vase(tilt_deg: float = 50.0, height: float = 1.5, segments: int = 160, rings: int = 120,
-         seed: int = 0) -> Mesh:
-    """A wide-mouthed vase (surface of revolution, closed bottom, open top), its top tilted
-    toward the camera so that the concave inside is visible."""
-    h = np.linspace(0, 1, rings)
-    r = vase_profile(seed)(h)
-    theta = np.linspace(0, 2 * np.pi, segments, endpoint=False)
-    wall = np.stack([r[:, None] * np.cos(theta), (h * height)[:, None].repeat(segments, 1),
-                     r[:, None] * np.sin(theta)], -1)
-    bottom_r = np.linspace(0, r[0], 12)[:-1]
-    bottom = np.stack([bottom_r[:, None] * np.cos(theta), np.zeros((len(bottom_r), segments)),
-                       bottom_r[:, None] * np.sin(theta)], -1)
-    mesh = merge(parametric_mesh(wall, wrap=True),
-                 parametric_mesh(np.concatenate([bottom, wall[:1]]), wrap=True))
-    t = np.radians(tilt_deg)
-    rotation = np.array([[1, 0, 0], [0, np.cos(t), -np.sin(t)], [0, np.sin(t), np.cos(t)]])
-    return fit_to_view(_mesh(mesh.vertices @ rotation.T, mesh.faces))
-
-
-def vase_profile(seed: int = 0) -> CubicSpline:
-    """The :func:`vase`'s outline: a spline from heights as shares of the vase's height, in
-    [0, 1], to radii in the mesh's units (the default height, 1.5, is about twice the width)."""
-    rng = np.random.default_rng(seed)
-    return CubicSpline([0, 0.15, 0.4, 0.7, 0.85, 1.0],
-                       np.array([0.22, 0.36, 0.44, 0.34, 0.32, 0.42]) * rng.uniform(0.95, 1.05))
 
 
 def rose(layers: int = 6, seed: int = 0) -> Mesh:

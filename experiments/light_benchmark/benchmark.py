@@ -1,0 +1,239 @@
+"""Light estimation on captures unps has never seen: every light stage, on every object and rig.
+
+    python experiments/light_benchmark/benchmark.py                  # everything (~1.5 h, 2 cores)
+    python experiments/light_benchmark/benchmark.py --only benchmark --sets 12
+    python experiments/light_benchmark/benchmark.py --stages reversal contour selfcal
+    python experiments/light_benchmark/benchmark.py --set selfcal.gbr_weight=0.1 --tag gbr01
+
+The cases (none of them feeds training):
+
+- **benchmark**: the 24 objects of ``scenes.py`` (meshes and procedural shapes with cavities, thin
+  parts and self-shadowing, painted with two or three held-out MERL materials, rendered with
+  cast shadows and interreflections), each under a DiLiGenT-like dome of 96 lights and sparse
+  rigs of 20 and 12, stored as 8-bit (``floor`` and ``round``) or 16-bit with sensor noise.
+  Rendered on first use into ``--cache`` (about 20 s per object on 2 cores), then read from it.
+- **diligent**: ball, cat and pot1 of ``../shared/data`` at 96 images, and at 20 and 12 images
+  evenly spread over their lights (farthest-point order from the light nearest the view).
+- **synthetic**: unps's eight rendered subjects (100 images).
+
+Each case runs ``light=estimated`` as ``python -m unps.fit`` does (the network, then the stages
+of ``--stages``, default those of ``light=selfcal``; ``--set`` overrides their settings as on the
+command line) and prints, per stage, the direction error and intensity error of the lights after
+it, flagging a stage that raised the direction error by more than 1° (``+``) or 2° (``++``).
+Results are kept case by case in ``--out`` (a run is resumed by rerunning the command); the
+summary compares, per light count, the final lights with the network's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from unps.data.catalogue import subjects
+from unps.data.diligent import read_diligent, read_diligent_object
+from unps.errors import InputError
+from unps.timing import recording
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import scenes  # noqa: E402
+
+DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
+DEFAULT_CACHE = Path("~/.cache/unps/light_benchmark").expanduser()
+DILIGENT = ("ball", "cat", "pot1")
+GROUPS = ("benchmark", "diligent", "synthetic")
+RAISED, RAISED_TWICE = 1.0, 2.0     # degrees: a stage that raised the error by more is flagged
+
+
+def evenly_spread(directions: np.ndarray, count: int) -> np.ndarray:
+    """Indices of ``count`` of the (n, 3) unit directions, spread evenly: the one nearest the
+    view axis (+z), then each time the one farthest from those chosen (sorted).
+
+    >>> evenly_spread(np.array([[0, 0, 1.0], [0.1, 0, 0.995], [0.6, 0, 0.8], [-0.6, 0, 0.8]]), 3)
+    array([0, 2, 3])
+    """
+    chosen = [int(np.argmax(directions[:, 2]))]
+    nearest = directions @ directions[chosen[0]]
+    while len(chosen) < min(count, len(directions)):
+        chosen.append(int(np.argmin(nearest)))
+        nearest = np.maximum(nearest, directions @ directions[chosen[-1]])
+    return np.sort(chosen)
+
+
+def cases(groups, sets, data: Path, cache: Path, names=None):
+    """(group, name, light set, function reading the subject) for every case asked for."""
+    if "benchmark" in groups:
+        for obj in scenes.OBJECTS:
+            if names and obj.name not in names:
+                continue
+            for label in sets:
+                def read(obj=obj, label=label):
+                    folder = scenes.make_captures(obj, data, cache)[label]
+                    return read_diligent(folder, name=obj.name,
+                                         quantization=scenes.quantization(obj.storage))
+                yield "benchmark", obj.name, label, read
+    if "diligent" in groups:
+        for name in DILIGENT:
+            if names and name not in names:
+                continue
+            for label in sets:
+                def read(name=name, label=label):
+                    subject = read_diligent_object(data / "DiLiGenT", name)
+                    if int(label) < subject.n_images:
+                        subject = subject.select(evenly_spread(subject.light_directions, int(label)))
+                    return subject
+                yield "diligent", name, label, read
+    if "synthetic" in groups:
+        for name in subjects("synthetic"):
+            if not names or name in names:
+                yield "synthetic", name, str(100), lambda name=name: synthetic(name)
+
+
+def synthetic(name: str):
+    return instantiate_node(["fit"], [f"subject={name}"], "subject")()
+
+
+def instantiate_node(config: list[str], overrides: list[str], key: str):
+    """A node of a composed unps config, instantiated (partial nodes stay callables)."""
+    from hydra import compose, initialize_config_module
+    from hydra.utils import instantiate
+    from omegaconf import OmegaConf
+
+    with initialize_config_module("unps.conf", version_base=None):
+        node = compose(config[0], overrides=overrides)[key]
+    return instantiate(OmegaConf.to_container(node, resolve=True), _partial_=True)
+
+
+def light_source(stages: list[str] | None, settings: list[str]):
+    """``light=selfcal``'s light source as ``python -m unps.fit`` builds it, with these stages
+    and ``light.<key>=<value>`` overrides."""
+    overrides = ["light=selfcal", *(f"light.{s}" for s in settings)]
+    if stages is not None:
+        overrides.append(f"light.stages=[{','.join(stages)}]")
+    from hydra import compose, initialize_config_module
+    from hydra.utils import instantiate
+    from omegaconf import OmegaConf
+
+    with initialize_config_module("unps.conf", version_base=None):
+        node = OmegaConf.to_container(compose("fit", overrides=overrides).light, resolve=True)
+    node.pop("name")
+    return instantiate(node), node["stages"]
+
+
+def run_case(source, subject) -> dict:
+    """The lights' errors after each stage, each stage's verdict, and the seconds it took."""
+    with recording() as seconds:
+        start = time.perf_counter()
+        lights = source(subject)
+        total = time.perf_counter() - start
+    stages = [{"stage": v.stage, "outcome": v.outcome, "dir": v.errors["light_dir_mae"],
+               "int": v.errors.get("light_int_err"), "reason": v.reason} for v in lights.verdicts]
+    return {"stages": stages, "seconds": total, "stage_seconds": dict(seconds),
+            "n_images": subject.n_images}
+
+
+def flag(before: float, after: float) -> str:
+    raised = after - before
+    return "++" if raised > RAISED_TWICE else "+" if raised > RAISED else ""
+
+
+def row(group: str, name: str, label: str, result: dict, stage_names: list[str]) -> str:
+    errors = {s["stage"]: s for s in result["stages"]}
+    network = errors["network"]["dir"]
+    cells, flags, previous = [f"{network:>7.2f}°"], [], network
+    for stage in stage_names:
+        s = errors[stage]
+        mark = flag(previous, s["dir"])
+        if mark:
+            flags.append(f"{stage}{mark}")
+        cells.append(f"{s['dir']:>7.2f}°{s['outcome'][0]}")
+        previous = s["dir"]
+    final = result["stages"][-1]
+    intensity = final["int"]
+    return (f"{group:<9} {name:<12} {label:>3} " + " ".join(cells)
+            + f" {final['dir']:>7.2f}° {intensity if intensity is not None else float('nan'):>6.3f}"
+            f" {result['seconds']:>5.0f}s  {' '.join(flags)}")
+
+
+def summary(results: dict, stage_names: list[str]) -> str:
+    """Per group and light count: mean network and final error, their ratio, the flags."""
+    lines = [f"\n{'group':<9} {'set':>4} {'cases':>5} {'network':>8} {'final':>8} {'ratio':>6} "
+             f"{'>1° raises':>10} {'>2° raises':>10} {'worst raise':>12}"]
+    keys = sorted({(k[0], k[2]) for k in results}, key=lambda k: (GROUPS.index(k[0]), -int(k[1])))
+    for group, label in keys:
+        chosen = [r for k, r in results.items() if k[0] == group and k[2] == label]
+        network = np.mean([r["stages"][0]["dir"] for r in chosen])
+        final = np.mean([r["stages"][-1]["dir"] for r in chosen])
+        raises = [s["dir"] - r["stages"][i]["dir"] for r in chosen
+                  for i, s in enumerate(r["stages"][1:])]
+        lines.append(f"{group:<9} {label:>4} {len(chosen):>5} {network:>7.2f}° {final:>7.2f}° "
+                     f"{final / network:>6.2f} {sum(x > RAISED for x in raises):>10} "
+                     f"{sum(x > RAISED_TWICE for x in raises):>10} {max(raises, default=0):>11.2f}°")
+    return "\n".join(lines)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
+    parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE,
+                        help="where the benchmark's captures are rendered and kept")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="where each case's result is kept (default: <cache>/results/<tag>)")
+    parser.add_argument("--tag", default="default", help="names the results folder")
+    parser.add_argument("--only", nargs="+", choices=GROUPS, default=list(GROUPS))
+    parser.add_argument("--sets", nargs="+", choices=list(scenes.LIGHT_SETS), default=list(scenes.LIGHT_SETS))
+    parser.add_argument("--names", nargs="*", help="only these objects or subjects")
+    parser.add_argument("--stages", nargs="*", default=None,
+                        help="as light.stages (default: light=selfcal's)")
+    parser.add_argument("--set", dest="settings", nargs="*", default=[],
+                        help="light.<key>=<value> overrides, e.g. selfcal.steps=1000")
+    parser.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's)")
+    parser.add_argument("--verbose", action="store_true")
+    args = parser.parse_args()
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.ERROR,
+                        format="%(name)s: %(message)s")
+    if args.threads:
+        import torch
+        torch.set_num_threads(args.threads)
+    from hydra.errors import ConfigCompositionException
+    try:
+        source, stage_names = light_source(args.stages, args.settings)
+    except (InputError, ConfigCompositionException) as e:
+        parser.error(str(e))
+    out = args.out or args.cache / "results" / args.tag
+    out.mkdir(parents=True, exist_ok=True)
+    made_with = {"stages": stage_names, "settings": args.settings, "scenes": scenes.SCENE_VERSION}
+    recorded = out / "settings.json"
+    if recorded.is_file() and json.loads(recorded.read_text()) != made_with:
+        parser.error(f"the results in {out} were made with other settings "
+                     f"({recorded.read_text().strip()}); give another --tag or --out")
+    recorded.write_text(json.dumps(made_with) + "\n")
+    print(f"stages: network → {' → '.join(stage_names) or '(none)'}; settings: "
+          f"{' '.join(args.settings) or 'defaults'}; results in {out}")
+    print(f"{'group':<9} {'case':<12} {'set':>3} {'network':>8} "
+          + " ".join(f"{s:>9}" for s in stage_names) + f" {'final':>8} {'int':>6} {'time':>6}  raised")
+    results = {}
+    for group, name, label, read in cases(args.only, args.sets, args.data, args.cache, args.names):
+        path = out / f"{group}-{name}-{label}.json"
+        if path.is_file():
+            result = json.loads(path.read_text())
+        else:
+            try:
+                subject = read()
+            except InputError as e:
+                print(f"{group:<9} {name:<12} {label:>3} skipped: {e}")
+                continue
+            result = run_case(source, subject)
+            path.write_text(json.dumps(result, indent=1))
+        results[group, name, label] = result
+        print(row(group, name, label, result, stage_names), flush=True)
+    print(summary(results, stage_names))
+
+
+if __name__ == "__main__":
+    main()
