@@ -241,6 +241,31 @@ def test_a_killed_fit_resumes_from_its_last_checkpoint_and_a_finished_one_reads_
         fit(other)
 
 
+def test_ctrl_c_says_where_the_fit_stopped_and_the_same_command_resumes(tmp_path, monkeypatch):
+    import signal
+
+    from unps.errors import Interrupted
+
+    step = InverseRendering.training_step
+
+    def stopped_at_25(self, batch, batch_idx):
+        if self.global_step == 25:
+            raise KeyboardInterrupt
+        return step(self, batch, batch_idx)
+
+    monkeypatch.setattr(InverseRendering, "training_step", stopped_at_25)
+    cfg = config(tmp_path, *tiny_overrides(steps=40), "light=gt")
+    handler = signal.getsignal(signal.SIGINT)
+    try:
+        with pytest.raises(Interrupted, match="interrupted at step 25 of 40: the same command resumes "
+                                              "from the checkpoint of step 20"):
+            fit(cfg)
+    finally:
+        signal.signal(signal.SIGINT, handler)          # Lightning ignores Ctrl-C once it has seen one
+    monkeypatch.setattr(InverseRendering, "training_step", step)
+    assert fit(cfg)["resumed_from_step"] == 20
+
+
 def test_a_diverging_fit_stops_with_a_clear_message(tmp_path, monkeypatch):
     render = InverseRendering.render
 

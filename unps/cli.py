@@ -69,8 +69,9 @@ def command_line(hydra_main: Callable[[], None]) -> Callable[[], None]:
         except InstantiationException:      # raised by the task, not the command line
             raise
         except (HydraException, OmegaConfBaseException) as e:
-            _say(program, f"the command line: {one_line(e)} (python -m unps.fit --help lists the "
-                          f"options)")
+            culprit = f"{e.override}: " if getattr(e, "override", None) else ""   # a parse error
+            _say(program, f"the command line: {culprit}{one_line(e)} (python -m {program[10:]} --help "
+                          f"lists the options)")
             sys.exit(2)
         except OSError as e:                # Hydra makes the run folder and its log file first
             where = f" {e.filename}" if e.filename else ""

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -133,7 +134,42 @@ CASES = [
     Case("framing outside (0, 1]", "`light=estimated light.framings=[1.0,1.5]`",
          lambda root: ["subject=lambertian", "light=estimated", "light.framings=[1.0,1.5]", *WOODHAM], 2,
          "light.framings"),
+    Case("seed not a whole number", "`seed=abc`",
+         lambda root: ["subject=lambertian", "light=gt", "seed=abc", *WOODHAM], 2, "seed must be"),
+    Case("no fit steps", "`preset.steps=0` with `method=unps`",
+         lambda root: ["subject=lambertian", "light=gt", "preset.steps=0"], 2, "preset.steps"),
+    Case("negative fit steps", "`preset.steps=-5` with `method=unps`",
+         lambda root: ["subject=lambertian", "light=gt", "preset.steps=-5"], 2, "preset.steps"),
+    Case("fractional fit steps", "`preset.steps=2.5` with `method=unps`",
+         lambda root: ["subject=lambertian", "light=gt", "preset.steps=2.5"], 2, "preset.steps"),
+    Case("learning rate zero", "`preset.lr=0` with `method=unps`",
+         lambda root: ["subject=lambertian", "light=gt", "preset.lr=0"], 2, "preset.lr"),
+    Case("pixel share above 1", "`preset.pixel_keep=1.5` with `method=unps`",
+         lambda root: ["subject=lambertian", "light=gt", "preset.pixel_keep=1.5"], 2, "preset.pixel_keep"),
+    Case("unknown option of a group", "`preset=nonexistent`",
+         lambda root: ["subject=lambertian", "light=gt", "preset=nonexistent", *WOODHAM], 2,
+         "preset/nonexistent"),
+    Case("misspelt method", "`method=typo`",
+         lambda root: ["subject=lambertian", "light=gt", "method=typo"], 2, "method/typo"),
+    Case("unknown key", "`light.nokey=3`",
+         lambda root: ["subject=lambertian", "light=gt", "light.nokey=3", *WOODHAM], 2, "light.nokey"),
+    Case("value Hydra cannot parse", "`noise=[0.1`",
+         lambda root: ["subject=lambertian", "light=gt", "noise=[0.1", *WOODHAM], 2, "noise=[0.1"),
+    Case("run folder is a file", "`hydra.run.dir` naming an existing file",
+         lambda root: ["subject=lambertian", "light=gt", *WOODHAM, f"hydra.run.dir={_a_file(root)}"], 2,
+         "cannot write"),
+    Case("run folder inside a file", "`hydra.run.dir` below an existing file",
+         lambda root: ["subject=lambertian", "light=gt", *WOODHAM, f"hydra.run.dir={_a_file(root)}/run"],
+         2, "cannot write"),
     # -- files --------------------------------------------------------------------------------
+    Case("folder under ~", "`subject.root=~/…` unquoted, as bash passes it (works)",
+         lambda root: ["subject=folder", f"subject.root=~/{sphere_folder(root).relative_to(root.parent)}",
+                       "light=gt", *WOODHAM], 0, ""),
+    Case("no mask file", "a folder without `mask.png` (works: the mask is found from the images)",
+         lambda root: _without_mask(root), 0, ""),
+    Case("named mask missing", "`subject.mask=other.png` not in the folder",
+         lambda root: folder_args(sphere_folder(root), "subject.mask=other.png", "light=gt", *WOODHAM), 2,
+         "mask file not found"),
     Case("root not a folder", "`subject.root` that does not exist",
          lambda root: folder_args(root / "nowhere", *WOODHAM), 2, "nowhere: not a folder"),
     Case("no images", "a folder without image files",
@@ -204,6 +240,17 @@ def _mask_of(root: Path, mask: np.ndarray) -> list[str]:
     return folder_args(folder, "light=gt", *WOODHAM)
 
 
+def _a_file(root: Path) -> Path:
+    (root / "taken").write_text("not a folder\n")
+    return root / "taken"
+
+
+def _without_mask(root: Path) -> list[str]:
+    folder = sphere_folder(root)
+    (folder / "mask.png").unlink()
+    return folder_args(folder, "light=gt", *WOODHAM)
+
+
 def _without_lights(root: Path) -> list[str]:
     folder = sphere_folder(root)
     (folder / "light_directions.txt").unlink()
@@ -217,11 +264,12 @@ class Outcome:
     message: str          # the last line on stderr (errors) or the matching warning
     traceback: bool
     wrote_metrics: bool
+    left_run_folder: bool
 
     @property
     def passed(self) -> bool:
         return (self.code == self.case.code and self.case.culprit in self.message and not self.traceback
-                and self.wrote_metrics == (self.code == 0))
+                and self.wrote_metrics == (self.code == 0) and not self.left_run_folder)
 
 
 def run(case: Case) -> Outcome:
@@ -231,8 +279,10 @@ def run(case: Case) -> Outcome:
         (root / "input").mkdir()
         args = case.build(root / "input")
         out = root / "run"
-        done = subprocess.run([sys.executable, "-m", "unps.fit", *args, f"hydra.run.dir={out}"],
-                              cwd=root, capture_output=True, text=True, timeout=600)
+        if not any(a.startswith("hydra.run.dir=") for a in args):
+            args = [*args, f"hydra.run.dir={out}"]
+        done = subprocess.run([sys.executable, "-m", "unps.fit", *args], cwd=root, capture_output=True,
+                              text=True, timeout=600, env={**os.environ, "HOME": str(root)})
         text = done.stdout + done.stderr
         metrics = out / "metrics.json"
         if done.returncode == 0 and metrics.is_file():
@@ -241,7 +291,8 @@ def run(case: Case) -> Outcome:
         else:
             lines = [line for line in done.stderr.splitlines() if line.strip()]
             message = lines[-1] if lines else ""
-        return Outcome(case, done.returncode, message, "Traceback" in text, metrics.is_file())
+        left = out.exists() and done.returncode != 0          # bad input leaves no run folder
+        return Outcome(case, done.returncode, message, "Traceback" in text, metrics.is_file(), left)
 
 
 def table(outcomes: list[Outcome]) -> str:
@@ -269,7 +320,7 @@ def main() -> None:
             "# Bad input and what unps says\n\nGenerated by `python experiments/bad_input/cases.py` "
             "(every case is also a test, `tests/test_cli_bad_input.py`). Each row is one run of "
             "`python -m unps.fit` on a 32×32 rendered sphere broken one way. Errors exit with status 2, "
-            "print one line on stderr and write nothing; inputs that can still be solved exit 0 and "
+            "print one line on stderr and leave no run folder; inputs that can still be solved exit 0 and "
             "record the warning in `metrics.json`. No case prints a traceback. What the warnings "
             f"mean: [own_photos.md](own_photos.md).\n\n{table(outcomes)}\n")
         print(f"wrote {DOCS}")

@@ -177,6 +177,16 @@ def summary(results: dict, stage_names: list[str]) -> str:
     return "\n".join(lines)
 
 
+def catalogue() -> str:
+    """The benchmark's objects as a Markdown table."""
+    lines = ["| object | shape | materials (held-out MERL) | stored as |", "| --- | --- | --- | --- |"]
+    for obj in scenes.OBJECTS:
+        builder, arguments = obj.shape
+        shape = builder + "(" + ", ".join(f"{k}={v}" for k, v in arguments.items()) + ")"
+        lines.append(f"| {obj.name} | `{shape}` | {', '.join(obj.materials)} | {obj.storage} |")
+    return "\n".join(lines)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
@@ -193,8 +203,12 @@ def main():
     parser.add_argument("--set", dest="settings", nargs="*", default=[],
                         help="light.<key>=<value> overrides, e.g. selfcal.steps=1000")
     parser.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's)")
+    parser.add_argument("--list", action="store_true", help="print the objects as a Markdown table and stop")
     parser.add_argument("--verbose", action="store_true")
     args = parser.parse_args()
+    if args.list:
+        print(catalogue())
+        return
     logging.basicConfig(level=logging.INFO if args.verbose else logging.ERROR,
                         format="%(name)s: %(message)s")
     if args.threads:

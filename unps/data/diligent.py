@@ -10,6 +10,9 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
+
+from unps.data.automask import auto_mask
 from unps.data.layout import FILENAMES, MASK, check_root, natural_key, read_filenames, read_layout
 from unps.data.prepare import prepare
 from unps.data.subject import Subject
@@ -118,10 +121,12 @@ def read_folder(root: str | os.PathLike, mask: str = MASK, encoding: str = "auto
 
     Images are those listed in ``filenames.txt`` if present, else every image file in the
     folder in natural name order (the mask and ``Normal_gt*`` excluded). Without
-    ``light_directions.txt`` the subject is uncalibrated. Without a mask file the whole
-    image is the object.
+    ``light_directions.txt`` the subject is uncalibrated.
 
     Args:
+        mask: the mask's file name in the folder; ``auto``: found from the images
+            (:func:`unps.data.automask.auto_mask`), which is also what a missing ``mask.png``
+            gives; ``none``: the whole image is the object.
         encoding: ``linear`` (raw or 16-bit captures), ``srgb`` (camera JPEGs/PNGs, inverted
             to linear), or ``auto``: ``srgb`` for JPEG files, ``linear`` otherwise.
         quantization: ``round`` (cameras), or ``floor`` for images truncated from a deeper
@@ -146,7 +151,34 @@ def read_folder(root: str | os.PathLike, mask: str = MASK, encoding: str = "auto
         encoding = "srgb" if jpeg else "linear"
         log.info("%s: treating images as %s (encoding=auto; set subject.encoding to override)",
                  root, encoding)
+    if mask not in ("auto", "none") and mask != MASK and not (root / mask).is_file():
+        raise InputError(f"{root / mask}: mask file not found (subject.mask names a file in the "
+                         f"folder, or is auto or none)")
     subject = read_layout(root, filenames, mask_file=root / mask, require_mask=False,
                            require_lights=False, encoding=encoding, quantization=quantization,
                            name=name)
+    if mask == "none":
+        log.info("%s: subject.mask=none: the whole image is the object", root)
+    elif not (root / mask).is_file():
+        subject = subject.replace(mask=found_mask(subject, root, mask))
     return prepare(subject, drop=drop, crop_margin=crop_margin, downsample=downsample)
+
+
+CONTRAST_WARNING = 2.0   # the object changes with the light less than this many times the
+                        # background does: the mask is a guess (DiLiGenT: 5-18; noise: 0.9)
+
+
+def found_mask(subject: Subject, root: Path, asked: str) -> np.ndarray:
+    """The mask :func:`unps.data.automask.auto_mask` finds in the subject's images, logged."""
+    found = auto_mask(subject.observed_images())
+    why = "subject.mask=auto" if asked == "auto" else f"no {asked} in the folder"
+    log.info("%s: %s: the object's mask was found from the images: %d of %d pixels change with "
+             "the light (spread above %.3g of the 99th percentile; %.1f× the background's); it is written "
+             "as mask.png in the run folder", root, why, found.mask.sum(), found.mask.size,
+             found.threshold, found.contrast)
+    if found.contrast < CONTRAST_WARNING:
+        log.warning("%s: the automatic mask is unsure: what it calls the object changes with the "
+                    "light only %.1f× as much as what it calls the background (under %.0f×), so the "
+                    "background may change with the light too; check mask.png in the run folder and "
+                    "give a mask.png if it is wrong", root, found.contrast, CONTRAST_WARNING)
+    return found.mask

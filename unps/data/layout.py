@@ -134,12 +134,7 @@ def read_layout(root: Path, filenames: list[str], mask_file: Path, require_mask:
     if intensities is not None:
         images /= intensities[:, None, None, :]
 
-    if mask_file.is_file():
-        mask = read_mask(mask_file, size[:2])
-    else:
-        log.warning("%s: no mask file %s; using the whole image as the object", root,
-                    mask_file.name)
-        mask = np.ones(size[:2], bool)
+    mask = read_mask(mask_file, size[:2]) if mask_file.is_file() else np.ones(size[:2], bool)
 
     normals = read_mat(root / NORMALS, "Normal_gt", size[:2] + (3,))
     depth = read_mat(root / DEPTH, "Depth_gt", size[:2])

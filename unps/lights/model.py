@@ -100,10 +100,13 @@ class SelfCalibrationModel(nn.Module):
         depth: (H, W) starting depth; mask: (H, W) bool with m object pixels.
         albedo: (m, 3) starting RGB albedo (> 0).
         sharpness: the lobes' κ_k.
+        gloss_per_pixel: the lobes scaled by a factor g_p per pixel (starting at 1), for objects
+            of several materials; else shared by the whole object.
     """
 
     def __init__(self, scaled_lights: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor,
-                 albedo: torch.Tensor, sharpness: tuple[float, ...], levels: int = 4):
+                 albedo: torch.Tensor, sharpness: tuple[float, ...], levels: int = 4,
+                 gloss_per_pixel: bool = False):
         super().__init__()
         self.register_buffer("scaled_lights", scaled_lights.float())
         self.register_buffer("mask", mask)
@@ -115,6 +118,7 @@ class SelfCalibrationModel(nn.Module):
         self.light_residual = nn.Parameter(torch.zeros_like(self.scaled_lights))
         self.log_albedo = nn.Parameter(albedo.clamp_min(1e-6).log())
         self.lobe_logits = nn.Parameter(torch.full((len(sharpness),), -5.0))
+        self.log_gloss = nn.Parameter(torch.zeros(len(albedo))) if gloss_per_pixel else None
 
     def frame(self) -> torch.Tensor:
         """(3, 3) A = [c_x | c_y | μ c_x + ν c_y + λ e_z], scaled to determinant ±1."""
@@ -156,6 +160,8 @@ class SelfCalibrationModel(nn.Module):
         cosine = (normals @ halfway.T).clamp(max=1)
         exponent = (self.sharpness[:, None, None] * (cosine - 1)).clamp_min(MIN_EXPONENT)
         specular = torch.einsum("k,kmn->mn", self.lobes(), torch.exp(exponent))
+        if self.log_gloss is not None:
+            specular = specular * self.log_gloss.exp()[:, None]
         radiance = self.log_albedo.exp()[:, None, :] + specular[..., None]
         if visible is not None:
             shading = shading * visible

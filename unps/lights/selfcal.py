@@ -75,6 +75,8 @@ class SelfCalibration:
             the first guess's frame (:func:`unps.lights.factorization.aligned_factorization`);
             ``first_guess``: from the first guess itself, the surface from the low-rank part
             under it.
+        gloss_per_pixel: each pixel scales the shared specular lobes by its own factor
+            (:class:`unps.lights.model.SelfCalibrationModel`).
         log_every: steps between progress lines.
     """
 
@@ -92,6 +94,7 @@ class SelfCalibration:
     prior_floor_deg: float = 3.0
     prior_intensity: float = 0.1
     start: str = "factorization"
+    gloss_per_pixel: bool = False
     log_every: int = 500
 
     name: ClassVar[str] = "selfcal"
@@ -199,7 +202,8 @@ def initial_model(grid: Subject, target: torch.Tensor, scaled_lights: np.ndarray
     lights = torch.as_tensor(scaled_lights).float()
     uniform = torch.full((target.shape[0], 3), START_ALBEDO)
     return SelfCalibrationModel(lights, torch.as_tensor(depth), torch.as_tensor(grid.mask),
-                                uniform, tuple(settings.sharpness), settings.levels)
+                                uniform, tuple(settings.sharpness), settings.levels,
+                                settings.gloss_per_pixel)
 
 
 def first_guess_pull(lights: Lights, settings: SelfCalibration) -> Pull | None:
@@ -253,6 +257,8 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
     visible = None
     light_parameters = [model.columns, model.gbr, model.light_residual]
     surface_parameters = [model.log_albedo, model.lobe_logits, *model.depth.parameters()]
+    if model.log_gloss is not None:
+        surface_parameters.append(model.log_gloss)
     groups = [dict(params=surface_parameters, lr=settings.lr)]
     if lights_free:
         groups.append(dict(params=light_parameters, lr=settings.lr_lights))

@@ -23,7 +23,8 @@ log = logging.getLogger(__name__)
 def write_fit_outputs(out: Path, subject: Subject, estimate: Estimate, depth: np.ndarray,
                       lights: Lights, metrics: dict, error: np.ndarray | None,
                       true_lights: Lights | None = None) -> None:
-    """Write normals, albedo, depth, mesh, error map, lights, TensorBoard and metrics.json.
+    """Write the mask used, normals, albedo, depth, mesh, error map, lights, TensorBoard and
+    metrics.json.
 
     ``lights.png`` shows the lights used, against the true ones when those are known.
     With ground truth, ``normals_gt.png`` and ``error.npy`` (float16 degrees) are written too,
@@ -41,6 +42,7 @@ def write_fit_outputs(out: Path, subject: Subject, estimate: Estimate, depth: np
         true_lights: the subject's calibrated lights, when known and not the ones used.
     """
     mask = subject.mask
+    write_png8(out / "mask.png", np.repeat(mask[..., None], 3, -1) * np.uint8(255))
     write_npy(out / "normals.npy", estimate.normals)
     write_png8(out / "normals.png", normal_rgb(estimate.normals, mask))
     write_npy(out / "albedo.npy", estimate.albedo)
