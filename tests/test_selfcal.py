@@ -9,13 +9,14 @@ from conftest import rendered
 from unps.data.subject import Subject
 from unps.errors import InputError
 from unps.lights import Lights, light_errors
-from unps.lights.factorization import aligned_factorization
+from unps.lights.factorization import normals_under
 from unps.lights.model import DepthPyramid, SelfCalibrationModel, normals_from_depth
 from unps.lights.selfcal import SelfCalibration, self_calibrate
 from unps.metrics import angular_error
 
-QUICK = SelfCalibration(steps=600, reference_steps=100, max_pixels=1200)
-ROTATION_RECOVERY = SelfCalibration(steps=1500, reference_steps=100, max_pixels=1600)
+QUICK = SelfCalibration(steps=600, max_pixels=1200)
+FREE = dict(prior_weight=0.0)       # no pull toward the first guess: what the images alone say
+ROTATION_RECOVERY = SelfCalibration(steps=1500, max_pixels=1600, **FREE)
 
 
 def glossy_sphere(size: int = 48, n_lights: int = 24, seed: int = 0) -> Subject:
@@ -71,17 +72,14 @@ def test_depth_pyramid_starts_at_its_start_and_moves_coarse_shape_in_one_step():
     torch.testing.assert_close(pyramid(), start + 4.0)
 
 
-def test_aligned_factorization_recovers_the_lights_of_a_lambertian_stack():
+def test_the_surface_under_the_true_lights_is_the_true_one():
     sphere = glossy_sphere()
-    gray = sphere.images[:, sphere.mask].mean(-1).T
     lambertian = np.clip(sphere.normals[sphere.mask] @ sphere.light_directions.T, 0, None)
-    _, scaled = aligned_factorization(lambertian * gray.mean(), rotated(sphere, 5).directions)
-    assert angular_error(scaled, rotated(sphere, 5).directions).mean() < 6
-    _, scaled = aligned_factorization(lambertian, sphere.light_directions)
-    assert angular_error(scaled, sphere.light_directions).mean() < 0.5
+    found = normals_under(0.7 * lambertian, sphere.light_directions)
+    assert angular_error(found, sphere.normals[sphere.mask]).mean() < 2.0     # measured 1.30°
 
 
-def test_self_calibration_undoes_a_15_degree_rotation_of_the_lights(glossy):
+def test_without_the_pull_the_images_undo_a_15_degree_rotation_of_the_lights(glossy):
     start = rotated(glossy, 15)
     found, verdict = self_calibrate(glossy, start, ROTATION_RECOVERY)
     assert verdict.outcome == "changed"
@@ -112,24 +110,57 @@ def test_self_calibration_of_a_bowl_holds_once_its_cast_shadows_are_rendered():
     bowl = rendered(concave=True)
     start = rotated(bowl, 10)
     errors = {every: light_errors(self_calibrate(bowl, start, SelfCalibration(
-        steps=600, reference_steps=100, max_pixels=1200, shadows_every=every))[0], bowl)["light_dir_mae"]
+        steps=600, max_pixels=1200, shadows_every=every, **FREE))[0], bowl)["light_dir_mae"]
         for every in (0, 100)}
     assert errors[100] < 3.0 and errors[0] > 4.5, errors
 
 
 def test_self_calibration_is_deterministic(glossy):
-    settings = SelfCalibration(steps=60, reference_steps=20, max_pixels=600)
+    settings = SelfCalibration(steps=60, max_pixels=600)
     first, second = (self_calibrate(glossy, rotated(glossy, 10), settings)[0] for _ in range(2))
     np.testing.assert_array_equal(first.directions, second.directions)
     np.testing.assert_array_equal(first.intensities, second.intensities)
 
 
-def test_self_calibration_keeps_its_first_guess_when_the_fit_does_not_help(glossy, caplog):
+def test_self_calibration_keeps_its_first_guess_when_the_fit_diverges(glossy, caplog, monkeypatch):
+    import unps.lights.selfcal as selfcal
+
+    monkeypatch.setattr(selfcal, "objective", lambda *args: torch.tensor(float("nan")))
     start = rotated(glossy, 10)
-    reckless = SelfCalibration(steps=20, reference_steps=20, max_pixels=600, lr_lights=3.0)
-    kept, verdict = self_calibrate(glossy, start, reckless)
-    assert kept is start and verdict.outcome == "declined"
+    kept, verdict = self_calibrate(glossy, start, SelfCalibration(steps=20, max_pixels=600))
+    assert kept is start and verdict.outcome == "declined" and "diverged" in verdict.reason
     assert "keeping the first guess" in caplog.text
+
+
+def test_the_pull_toward_the_network_loosens_where_its_passes_disagree():
+    from unps.lights.prior import network_prior
+
+    sure = Lights(np.eye(3, dtype=np.float32), None, "estimated", spread_deg=np.array([0.0, 3.0, 9.0]))
+    prior = network_prior(sure, weight=1.0, floor_deg=3.0, intensity_sigma=0.1)
+    expected = 1 / np.radians([3.0, np.hypot(3, 3), np.hypot(3, 9)]) ** 2
+    np.testing.assert_allclose(prior.weights.numpy(), expected, rtol=1e-5)
+    assert network_prior(sure, weight=0.0, floor_deg=3.0, intensity_sigma=0.1) is None
+    assert prior.cost(prior.directions, torch.ones(3)).item() == 0
+    assert prior.cost(prior.directions, torch.tensor([0.9, 1.0, 1 / 0.9])).item() > 0
+
+
+def test_a_matte_sphere_under_12_lights_keeps_the_networks_lights():
+    """A Lambertian sphere's images pin its lights only through integrability and a uniform
+    albedo, which a real object need not have: the default self-calibration leaves the network's
+    estimate nearly where it is (measured: moved 1.04°, error 2.56° → 2.82°), the fit without
+    the pull moves it further (1.64°, to 1.51°)."""
+    from unps.data.analytic import render_lambertian
+    from unps.lightnet.estimate import network_lights
+
+    sphere = render_lambertian("sphere", size=64, n_lights=12, seed=4)
+    estimate, _ = network_lights(sphere)
+    found, verdict = self_calibrate(sphere, estimate)
+    assert verdict.outcome == "changed"
+    assert angular_error(found.directions, estimate.directions).mean() < 1.25
+    assert light_errors(found, sphere)["light_dir_mae"] < light_errors(estimate, sphere)["light_dir_mae"] + 0.5
+    free, _ = self_calibrate(sphere, estimate, SelfCalibration(**FREE))
+    assert angular_error(free.directions, estimate.directions).mean() > \
+        angular_error(found.directions, estimate.directions).mean()
 
 
 def test_self_calibration_refuses_stacks_it_cannot_use(glossy):
@@ -152,7 +183,7 @@ def test_light_selfcal_in_a_fit_logs_each_stage_and_draws_the_lights(tmp_path, c
         cfg = compose("fit", overrides=[f"paths.output_dir={tmp_path}", "subject=lambertian",
                                         "subject.size=32", "light=selfcal", "method=woodham",
                                         "light.stages=[reversal,contour,selfcal]",   # every stage
-                                        "light.selfcal.steps=60", "light.selfcal.reference_steps=20"])
+                                        "light.selfcal.steps=60"])
     with caplog.at_level("INFO"):
         metrics = fit(cfg)
     assert metrics["light"] == "selfcal" and np.isfinite(metrics["light_dir_mae"])

@@ -4,10 +4,12 @@
     python experiments/automask/benchmark.py --no-lights     # masks only (seconds)
 
 Per subject: the intersection over union of the automatic mask with the true one, the pixels it
-adds and misses, how many times more than the background the object changes with the light, and (unless ``--no-lights``) the light network's estimate
-(``light=estimated``, without its stages) with the automatic mask against the estimate with the
-true mask and against the true lights. DiLiGenT's ball is read at its full frame (612×512, most
-of it background), cat and pot1 as the crops they are; unps's renders at 128×128.
+adds and misses, how many times more than the background the object changes with the light, and
+(unless ``--no-lights``) the light network's estimate (``light=estimated``, without its stages) with
+the automatic mask against the estimate with the true mask and against the true lights, and the
+estimate with the whole image as the object (``subject.mask=none``, what a folder without a mask
+gave before). DiLiGenT's ball is read at its full frame (612×512, most of it background), cat and
+pot1 as the crops they are; unps's renders at 128×128.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import argparse
 import logging
 from pathlib import Path
 
+import numpy as np
 from scipy import ndimage
 
 from unps.data.automask import auto_mask
@@ -46,7 +49,7 @@ def main():
     lights = None if args.no_lights else __import__("unps.pipeline.lights", fromlist=["x"]).estimated_lights
     print(f"{'subject':<10} {'pixels':>7} {'IoU':>6} {'added':>6} {'missed':>6} {'contrast':>8}"
           + ("" if args.no_lights else f" {'lights: true mask':>17} {'auto mask':>9} {'between':>8}"
-                                       f" {'eroded true mask':>16}"))
+                                       f" {'eroded true mask':>16} {'whole image':>11}"))
     for name in args.subjects:
         try:
             subject = (read_diligent_object(args.data / "DiLiGenT", name) if name in DILIGENT
@@ -63,10 +66,12 @@ def main():
             with_true = lights(subject, stages=[])
             with_auto = lights(subject.replace(mask=mask), stages=[])
             with_eroded = lights(subject.replace(mask=ndimage.binary_erosion(truth)), stages=[])
-            error = lambda l: light_direction_mae(l.directions, subject.light_directions)  # noqa: E731
+            with_whole = lights(subject.replace(mask=np.ones_like(truth)), stages=[])
+            error = lambda found: light_direction_mae(found.directions, subject.light_directions)  # noqa: E731
             row += (f" {error(with_true):>16.2f}° {error(with_auto):>8.2f}° "
                     f"{light_direction_mae(with_auto.directions, with_true.directions):>7.2f}° "
-                    f"{light_direction_mae(with_eroded.directions, with_true.directions):>15.2f}°")
+                    f"{light_direction_mae(with_eroded.directions, with_true.directions):>15.2f}° "
+                    f"{error(with_whole):>10.2f}°")
         print(row, flush=True)
 
 

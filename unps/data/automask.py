@@ -3,9 +3,12 @@
 The object is where the images change with the light; the background stays dark, or as it is,
 whatever the light. Per pixel, the spread of its brightness over the stack (95th percentile less
 5th, so a highlight or a hot pixel does not count) is split in two by Otsu's threshold on its
-logarithm; the largest connected region is the object, and each of its holes is filled when it
+logarithm; the largest connected region is the object, each of its holes is filled when it
 changes more with the light than the background does (a dark patch on the object changes little,
-but more than the background seen through a handle).
+but more than the background seen through a handle), and its outline against the background
+(not the frame's edge) loses one pixel: those
+pixels are partly background, and the light network, which sees the mask, reads the lights several
+degrees differently with them (``experiments/automask/README.md``).
 
 Frame: (row, col) images, row 0 at the top.
 """
@@ -20,6 +23,7 @@ from scipy import ndimage
 from unps.errors import InputError
 
 FLOOR = 1e-4          # spreads below this (in units of the stack's 99th percentile) are noise
+EDGE = 1              # pixels taken off the outline: partly object, partly background
 
 
 @dataclass(frozen=True)
@@ -98,6 +102,10 @@ def auto_mask(images: np.ndarray) -> AutoMask:
     holes, count = ndimage.label(filled & ~largest)
     kept = [k + 1 for k, median in enumerate(ndimage.median(spread, holes, range(1, count + 1)))
             if median > background]          # a hole as still as the background is background
-    mask = largest | np.isin(holes, kept)
+    object_ = largest | np.isin(holes, kept)
+    # the outline's pixels are mixed; the frame's edge is not an outline
+    mask = ndimage.binary_erosion(object_, iterations=EDGE, border_value=1)
+    if not mask.any():
+        mask = object_
     contrast = np.median(spread[mask]) / max(background, FLOOR)
     return AutoMask(mask, float(np.exp(cut)), float(contrast), int(regions))

@@ -18,7 +18,8 @@ from unps.data.subject import Subject
 from unps.errors import Diverged, InputError, Interrupted
 
 if TYPE_CHECKING:
-    from unps.inverse.system import InverseRendering, Schedule
+    from unps.inverse.schedule import Schedule
+    from unps.inverse.system import InverseRendering
 
 log = logging.getLogger(__name__)
 
@@ -97,9 +98,9 @@ def train(system: InverseRendering, schedule: Schedule, output_dir: str | Path |
 def interruption(step: int, schedule: Schedule, output_dir: str | Path | None) -> str:
     """What to tell a user who stopped a fit at ``step``.
 
-    >>> from unps.inverse.system import Schedule
-    >>> interruption(237, Schedule(steps=1000, update_every=100), "run")
-    'interrupted at step 237 of 1000: the same command resumes from the checkpoint of step 200 in run/checkpoints'
+    >>> from unps.inverse.schedule import Schedule
+    >>> print(interruption(37, Schedule(steps=100, update_every=10), "run"))
+    interrupted at step 37 of 100: the same command resumes from the checkpoint of step 30 in run/checkpoints
     >>> interruption(50, Schedule(steps=1000, update_every=100), None)
     'interrupted at step 50 of 1000: the same command starts the fit again'
     """

@@ -30,7 +30,8 @@ from unps.inverse.control import fingerprint, train
 from unps.inverse.grids import on_subject_grid, unclipped, upsample_with_detail, working_factor
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet
-from unps.inverse.system import InverseRendering, Schedule
+from unps.inverse.schedule import Schedule
+from unps.inverse.system import InverseRendering
 from unps.metrics import angular_error
 from unps.solvers.nayar import reflectance_scale
 from unps.solvers.rpca import robust_init

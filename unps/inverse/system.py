@@ -14,71 +14,18 @@ Frame: x right, y up, z toward the camera; light directions point from the surfa
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import lightning as L
 import numpy as np
 import torch
 import torch.nn.functional as F
 
-from unps.errors import Diverged, InputError
+from unps.errors import Diverged
 from unps.inverse.rng import restore_rng, rng_state
+from unps.inverse.schedule import Schedule
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet, normal_net_input, shading, specular_map
 from unps.timing import Span, stage
-
-
-@dataclass(frozen=True)
-class Schedule:
-    """The optimisation's hyper-parameters (supplementary §2.2 unless noted).
-
-    Attributes:
-        steps: Adam steps (1000).
-        lr: learning rate (8e-4).
-        normal_lr: learning rate of the estimation branch ξ_f, ξ_n1; None = ``lr`` (the paper
-            used 8e-5 on its own dataset).
-        lr_drop_at: the step after which every learning rate is divided by 10 (900).
-        input_noise_var: variance of the Gaussian noise added to f_sp's image input (0.1), on
-            images scaled to [0, ~1] (their 99th percentile over the object is 1).
-        images_per_step: images rendered per step; None = all of them.
-        pixel_keep: fraction of object pixels in each step's loss (Taniai & Maehara: 0.1).
-        prior_weight: weight of the prior ‖N_o − N_init‖² toward the robust initialisation.
-        prior_steps: the prior holds for the first this many steps.
-        update_every: depth and the interreflection kernel are rebuilt from N_o this often (100).
-    """
-
-    steps: int = 1000
-    lr: float = 8e-4
-    normal_lr: float | None = None
-    lr_drop_at: int = 900
-    input_noise_var: float = 0.1
-    images_per_step: int | None = None
-    pixel_keep: float = 0.1
-    prior_weight: float = 0.1
-    prior_steps: int = 50
-    update_every: int = 100
-
-    def __post_init__(self):
-        whole = {"steps": 1, "update_every": 1, "lr_drop_at": 0, "prior_steps": 0}
-        for name, least in whole.items():
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < least:
-                raise InputError(f"preset.{name} must be a whole number >= {least}, got {value!r}")
-        if self.images_per_step is not None and (not isinstance(self.images_per_step, int)
-                                                 or self.images_per_step < 1):
-            raise InputError(f"preset.images_per_step must be a whole number >= 1 or null (all "
-                             f"images), got {self.images_per_step!r}")
-        positive = {"lr": self.lr, "normal_lr": self.normal_lr, "pixel_keep": self.pixel_keep}
-        for name, value in positive.items():
-            if value is not None and not (isinstance(value, (int, float)) and value > 0):
-                raise InputError(f"preset.{name} must be a number > 0, got {value!r}")
-        if self.pixel_keep > 1:
-            raise InputError(f"preset.pixel_keep is a share of the object's pixels, in (0, 1]; got "
-                             f"{self.pixel_keep}")
-        for name in ("input_noise_var", "prior_weight"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and value >= 0):
-                raise InputError(f"preset.{name} must be a number >= 0, got {value!r}")
 
 
 class InverseRendering(L.LightningModule):

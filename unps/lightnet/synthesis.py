@@ -32,7 +32,8 @@ class LightDataset(Dataset):
         images: images per sample, drawn from ``lights_per_shape`` lights.
         max_zenith_deg: the light cap.
         materials: a :class:`MaterialBank`.
-        meshes: optional shape maps from :func:`unps.lightnet.meshes.mesh_views`, used for ``mesh_fraction`` of samples.
+        meshes: optional shape maps from :func:`unps.lightnet.meshes.mesh_views`, used for
+            ``mesh_fraction`` of samples.
         texture: largest relative albedo variation over the surface (smooth).
         paint: share of samples with painted patches of other colours (:func:`painted`).
         perturbation: half-width of the uniform noise added to images scaled to a 99th

@@ -11,13 +11,13 @@ w_k ≥ 0 the weights of K spherical-Gaussian specular lobes of fixed sharpness 
 whole object, h_i the half vector between l_i and the view v = (0, 0, 1) (orthographic), and
 (l_i, e_i) the direction and intensity of light i.
 
-The lights are parameterised around a Lambertian factorization (:mod:`unps.lights.factorization`):
-s_i = (s̃_i + ε_i)·A, l_i = s_i / |s_i|, e_i = |s_i| (normalised to geometric mean 1). The 3×3
-matrix A carries what the factorization cannot know, and is split as A = [c_x | c_y | μ c_x +
-ν c_y + λ e_z]: the columns c_x, c_y are fixed by the integrability of the depth map, while
-(μ, ν, λ) is the generalised bas-relief (GBR) transform that integrable Lambertian shading leaves
-free and only the specular lobes (and a prior toward the starting lights) pin down. ε_i is a small
-per-light correction.
+The lights are parameterised around a first guess s̃_i (the light network's directions; the
+images are divided by its intensities): s_i = (s̃_i + ε_i)·A, l_i = s_i / |s_i|, e_i = |s_i|
+(normalised to geometric mean 1). The 3×3 matrix A carries what all the lights share, and is split
+as A = [c_x | c_y | μ c_x + ν c_y + λ e_z]: the columns c_x, c_y are fixed by the integrability of
+the depth map, while (μ, ν, λ) is the generalised bas-relief (GBR) transform that integrable
+Lambertian shading leaves free and only the specular lobes (and the pull toward the first guess,
+:mod:`unps.lights.prior`) pin down. ε_i is a small per-light correction.
 
 Frame: x right (+col), y up (−row), z toward the camera; depth in pixels of the working grid.
 """
@@ -96,17 +96,14 @@ class SelfCalibrationModel(nn.Module):
     """Lights, depth, albedo and specular lobes of one subject on its working grid.
 
     Args:
-        scaled_lights: (n, 3) s̃_i, the factorization's lights (direction × relative intensity).
+        scaled_lights: (n, 3) s̃_i, the first guess (direction × relative intensity).
         depth: (H, W) starting depth; mask: (H, W) bool with m object pixels.
         albedo: (m, 3) starting RGB albedo (> 0).
         sharpness: the lobes' κ_k.
-        gloss_per_pixel: the lobes scaled by a factor g_p per pixel (starting at 1), for objects
-            of several materials; else shared by the whole object.
     """
 
     def __init__(self, scaled_lights: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor,
-                 albedo: torch.Tensor, sharpness: tuple[float, ...], levels: int = 4,
-                 gloss_per_pixel: bool = False):
+                 albedo: torch.Tensor, sharpness: tuple[float, ...], levels: int = 4):
         super().__init__()
         self.register_buffer("scaled_lights", scaled_lights.float())
         self.register_buffer("mask", mask)
@@ -118,7 +115,6 @@ class SelfCalibrationModel(nn.Module):
         self.light_residual = nn.Parameter(torch.zeros_like(self.scaled_lights))
         self.log_albedo = nn.Parameter(albedo.clamp_min(1e-6).log())
         self.lobe_logits = nn.Parameter(torch.full((len(sharpness),), -5.0))
-        self.log_gloss = nn.Parameter(torch.zeros(len(albedo))) if gloss_per_pixel else None
 
     def frame(self) -> torch.Tensor:
         """(3, 3) A = [c_x | c_y | μ c_x + ν c_y + λ e_z], scaled to determinant ±1."""
@@ -160,8 +156,6 @@ class SelfCalibrationModel(nn.Module):
         cosine = (normals @ halfway.T).clamp(max=1)
         exponent = (self.sharpness[:, None, None] * (cosine - 1)).clamp_min(MIN_EXPONENT)
         specular = torch.einsum("k,kmn->mn", self.lobes(), torch.exp(exponent))
-        if self.log_gloss is not None:
-            specular = specular * self.log_gloss.exp()[:, None]
         radiance = self.log_albedo.exp()[:, None, :] + specular[..., None]
         if visible is not None:
             shading = shading * visible
