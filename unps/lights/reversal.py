@@ -160,6 +160,11 @@ class ReversalTest:
     thin stem, 2026-11-25, was turned that way), nor for shadows that fall where a dark or
     mirror-like material is dark anyway.
 
+    The contrast is what tells: on the light benchmark (``experiments/light_benchmark``) the
+    reversed reading's shadows of a correct reading were at most 3× as often dark as expected,
+    those of the three readings inside out that cast shadows 8–45× (dark in 40–57 % of their
+    pairs).
+
     Attributes:
         hit_rate: share of the reversed reading's own shadow pairs that must be dark.
         contrast: how many times more often than expected of their pixels, and than the current
@@ -168,7 +173,7 @@ class ReversalTest:
     """
 
     name: ClassVar[str] = "reversal"
-    hit_rate: float = 0.4
+    hit_rate: float = 0.3
     contrast: float = 4.0
     min_pairs: int = 50
 
