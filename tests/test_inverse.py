@@ -333,3 +333,25 @@ def test_clipped_values_are_found_on_the_working_grid():
     usable = unclipped(clipped.crop_to_mask(4), 2)
     assert usable is not None and 0 < (usable == 0).mean() < 0.5
     assert unclipped(subject.crop_to_mask(4), 1) is None
+
+
+def test_a_fit_that_stops_moving_says_so_and_a_healthy_one_does_not(tmp_path):
+    healthy = fit(config(tmp_path / "healthy", *tiny_overrides(steps=40), "light=gt"))
+    assert not any("stopped moving" in w for w in healthy["warnings"])
+    dead = fit(config(tmp_path / "dead", *tiny_overrides(steps=40), "light=gt", "preset.lr=1e-30"))
+    stalled = [w for w in dead["warnings"] if "stopped moving" in w]
+    assert len(stalled) == 1 and "at step 20 of 40" in stalled[0], dead["warnings"]
+
+
+@pytest.mark.parametrize("preset", [TINY, dict(TINY, name="paper-like", width=384, depth=4, first_kernel=3,
+                                                reflectance_width=16)])
+def test_a_dark_capture_fits_as_the_bright_one_does(sphere, preset):
+    """Images scaled by 0.05 (a dark capture) give the normals of the bright ones: the fit
+    works on images scaled to their 99th percentile, whatever the exposure."""
+    normals = []
+    for brightness in (1.0, 0.05):
+        torch.manual_seed(0)
+        dark = sphere.replace(images=sphere.images * brightness)
+        normals.append(neural_inverse_rendering(dark, sphere.light_directions, Preset.from_config(**preset),
+                                                InterreflectionModel(**NAYAR)).normals)
+    assert angular_error(normals[0], normals[1])[sphere.mask].mean() < 0.5

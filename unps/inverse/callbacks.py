@@ -110,6 +110,38 @@ class ProgressLog(L.Callback):
                        per_step, duration(per_step * (trainer.max_steps - step)))
 
 
+class StallWatch(L.Callback):
+    """Warns, once, when a fit stops moving before its learning rates drop: every ``every``
+    steps the normals N_o are compared with those of ``every`` steps before, and a mean change
+    under ``least_change_deg`` means that no gradient reaches them any more (a dead fit: its
+    result is whatever the networks gave when they stopped, and the run would otherwise end
+    looking like any other)."""
+
+    def __init__(self, every: int, until: int, least_change_deg: float = 1e-3):
+        self.every, self.until, self.least_change_deg = every, until, least_change_deg
+        self._previous: np.ndarray | None = None
+        self._previous_loss: float | None = None
+        self.stalled_at: int | None = None
+
+    @rank_zero_only
+    def on_train_batch_end(self, trainer, module, outputs, batch, batch_idx) -> None:
+        step = trainer.global_step
+        if step % self.every or step > self.until or self.stalled_at is not None:
+            return
+        with torch.no_grad():
+            normals = module.normals()[0][0].permute(1, 2, 0).double().cpu().numpy()
+        loss = float(trainer.callback_metrics.get("loss/reconstruction", float("nan")))
+        if self._previous is not None:
+            change = float(angular_error(normals, self._previous)[module.mask_np].mean())
+            if change < self.least_change_deg:
+                self.stalled_at = step
+                log.warning("the fit stopped moving at step %d of %d: the normals changed by %.1e° "
+                            "over the last %d steps (loss %.4g, %.4g before), so its result is where "
+                            "it stalled; try a lower preset.lr or another seed", step,
+                            trainer.max_steps, change, self.every, loss, self._previous_loss)
+        self._previous, self._previous_loss = normals, loss
+
+
 def duration(seconds: float) -> str:
     """'42 s', '3 min 05 s'."""
     seconds = int(round(seconds))

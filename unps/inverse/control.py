@@ -52,11 +52,12 @@ def train(system: InverseRendering, schedule: Schedule, output_dir: str | Path |
     from lightning.pytorch.callbacks import ModelCheckpoint
     from lightning.pytorch.loggers import TensorBoardLogger
 
-    from unps.inverse.callbacks import FitPictures, ProgressLog
+    from unps.inverse.callbacks import FitPictures, ProgressLog, StallWatch
 
     ckpt_path, resumed_from = None, 0
     progress = ProgressLog(every=schedule.update_every)
-    options: dict = dict(logger=False, enable_checkpointing=False, callbacks=[progress])
+    watch = StallWatch(every=schedule.update_every, until=schedule.lr_drop_at)
+    options: dict = dict(logger=False, enable_checkpointing=False, callbacks=[progress, watch])
     if output_dir is not None:
         out = Path(output_dir)
         last = out / "checkpoints" / "last.ckpt"
@@ -71,7 +72,7 @@ def train(system: InverseRendering, schedule: Schedule, output_dir: str | Path |
             logger=TensorBoardLogger(str(out), name="tensorboard", version=""),
             callbacks=[ModelCheckpoint(dirpath=out / "checkpoints", save_last=True, save_top_k=0,
                                        every_n_train_steps=schedule.update_every),
-                       FitPictures(every=schedule.update_every), progress])
+                       FitPictures(every=schedule.update_every), progress, watch])
     trainer = L.Trainer(max_steps=schedule.steps, accelerator="auto", devices=1, log_every_n_steps=10,
                         enable_model_summary=False, enable_progress_bar=False, num_sanity_val_steps=0,
                         **options)
