@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 import torch
+from conftest import rendered
 from hydra import compose, initialize_config_module
 
 from unps.data.analytic import render_lambertian
@@ -14,7 +15,7 @@ from unps.inverse.fit import InterreflectionModel, Preset, interreflection_bend,
 from unps.inverse.grids import unclipped, upsample_normals, upsample_with_detail, working_factor
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet, normal_net_input, shading, specular_map
-from unps.inverse.system import InverseRendering
+from unps.inverse.system import InverseRendering, visibility
 from unps.metrics import angular_error
 
 TINY = dict(name="tiny", width=16, depth=3, first_kernel=1, reflectance_width=8, steps=20,
@@ -355,3 +356,36 @@ def test_a_dark_capture_fits_as_the_bright_one_does(sphere, preset):
         normals.append(neural_inverse_rendering(dark, sphere.light_directions, Preset.from_config(**preset),
                                                 InterreflectionModel(**NAYAR)).normals)
     assert angular_error(normals[0], normals[1])[sphere.mask].mean() < 0.5
+
+
+def test_visibility_hides_part_of_a_bowls_lit_side_from_a_low_light_and_none_of_a_domes():
+    low = torch.tensor([[0.9, 0.0, 0.43589]])                        # 64° from the view, from +x
+    for concave, least, most in ((True, 0.05, 1.0), (False, 0.0, 0.01)):
+        subject = rendered(concave=concave)
+        hidden = visibility(subject.normals, subject.mask, low)[0, 0].numpy() == 0
+        assert hidden.shape == subject.mask.shape
+        lit = subject.mask & (subject.normals @ low[0].numpy() > 0.05)   # facing the light
+        share = (hidden & lit).sum() / lit.sum()
+        assert least <= share <= most, (subject.name, share)
+        if concave:                         # the rim nearer the light shades the +x side
+            assert np.nonzero(hidden & lit)[1].mean() > subject.mask.shape[1] / 2
+
+
+def test_a_fit_with_cast_shadows_resumes_to_the_same_normals(tmp_path, monkeypatch):
+    step = InverseRendering.training_step
+
+    def dies_at_25(self, batch, batch_idx):
+        if self.global_step == 25:
+            raise RuntimeError("killed")
+        return step(self, batch, batch_idx)
+
+    overrides = [*tiny_overrides(steps=40), "light=gt", "preset.cast_shadows=true"]
+    monkeypatch.setattr(InverseRendering, "training_step", dies_at_25)
+    with pytest.raises(RuntimeError, match="killed"):
+        fit(config(tmp_path, *overrides))
+    monkeypatch.setattr(InverseRendering, "training_step", step)
+    metrics = fit(config(tmp_path, *overrides))
+    assert metrics["resumed_from_step"] == 20 and metrics["normal_mae"] < 30
+    fit(config(tmp_path / "uninterrupted", *overrides))
+    np.testing.assert_array_equal(np.load(tmp_path / "normals.npy"),
+                                  np.load(tmp_path / "uninterrupted" / "normals.npy"))

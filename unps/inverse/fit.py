@@ -52,6 +52,8 @@ class Preset:
         reflectance_width, reflectance_depth: f_sp (:class:`ReflectanceNet`).
         max_pixels: object pixels on the working grid; larger subjects are block-averaged by the
             smallest whole factor that fits, and the normals upsampled back. None = full resolution.
+        cast_shadows: beyond the paper, render the shadows that the fitted surface casts, from its
+            depth at each update (:func:`unps.inverse.system.visibility`).
         schedule: the optimisation's :class:`Schedule`.
     """
 
@@ -62,6 +64,7 @@ class Preset:
     reflectance_width: int = 16
     reflectance_depth: int = 3
     max_pixels: int | None = None
+    cast_shadows: bool = False
     schedule: Schedule = Schedule()
 
     @classmethod
@@ -205,7 +208,8 @@ def build_system(work: Subject, light_directions: np.ndarray, preset: Preset,
         normal_net, reflectance_net, images, mask, torch.as_tensor(light_directions, dtype=torch.float32),
         torch.as_tensor(init.normals).permute(2, 0, 1).contiguous(), solver, preset.schedule,
         refine_lights=refine_lights, true_normals=true_normals, fingerprint=run_fingerprint,
-        usable=None if usable is None else torch.as_tensor(usable)[:, None])
+        usable=None if usable is None else torch.as_tensor(usable)[:, None],
+        shadows=preset.cast_shadows)
     return system, scale
 
 

@@ -2,11 +2,13 @@
 
 Every step renders a batch of images through the physical model
 
-    X̃_i = s_i · ρ_i ⊙ max(N_ny · l_i, 0),
+    X̃_i = s_i · V_i ⊙ ρ_i ⊙ max(N_ny · l_i, 0),
 
 ρ_i = f_sp(X_i + noise, R_i(N_o, l_i), features), N_o = ξ_n1(ξ_f(X)), N_ny = ξ_n2(N_o) (or N_o with
 interreflections off), and compares it with the observed X_i. The images are divided by their
 light intensities, so s_i = 1 unless the lights are refined (then s_i and l_i are learnt).
+V_i is 1, or, with cast shadows on (beyond the paper), 0 where the depth integrated from N_o at
+the last update hides the pixel from light i.
 
 Frame: x right, y up, z toward the camera; light directions point from the surface to the light.
 """
@@ -21,11 +23,31 @@ import torch
 import torch.nn.functional as F
 
 from unps.errors import Diverged
+from unps.geometry import cast_shadows, integrate_normals
 from unps.inverse.rng import restore_rng, rng_state
 from unps.inverse.schedule import Schedule
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet, normal_net_input, shading, specular_map
 from unps.timing import Span, stage
+
+
+def visibility(normals: np.ndarray, mask: np.ndarray, directions: torch.Tensor) -> torch.Tensor:
+    """V: 1 where each light reaches a pixel, 0 where the surface of ``normals`` shadows it.
+
+    Args:
+        normals: (H, W, 3) unit normals; their depth is integrated (in pixels) and marched
+            toward each light with one sample per pixel of the grid's diagonal.
+        mask: (H, W) bool.
+        directions: (n, 3) unit, surface to light.
+
+    Returns:
+        (n, 1, H, W) float32.
+    """
+    depth = torch.as_tensor(np.nan_to_num(integrate_normals(normals, mask)), dtype=torch.float32)
+    h, w = mask.shape
+    hidden = cast_shadows(depth, torch.as_tensor(mask), directions.detach().float().cpu(), 1.0,
+                          int(np.ceil(np.hypot(h, w))))
+    return (~hidden).float()[:, None]
 
 
 class InverseRendering(L.LightningModule):
@@ -52,19 +74,20 @@ class InverseRendering(L.LightningModule):
         true_normals: (3, H, W) ground truth, for the progress bar's MAE only.
         fingerprint: identifies the run; stored in checkpoints so a resume cannot mix runs.
         usable: (n, 1, H, W) 1 where a value may enter the loss, 0 where it is clipped; None: all.
+        shadows: render the shadows that the current surface casts (V_i above).
     """
 
     def __init__(self, normal_net: NormalNet, reflectance_net: ReflectanceNet, images: torch.Tensor,
                  mask: np.ndarray, light_directions: torch.Tensor, init_normals: torch.Tensor,
                  interreflection: Interreflection | None, schedule: Schedule,
                  refine_lights: bool = False, true_normals: torch.Tensor | None = None,
-                 fingerprint: str = "", usable: torch.Tensor | None = None):
+                 fingerprint: str = "", usable: torch.Tensor | None = None, shadows: bool = False):
         super().__init__()
         self.normal_net, self.reflectance_net = normal_net, reflectance_net
         self.schedule, self.interreflection = schedule, interreflection
-        self.refine_lights, self.fingerprint = refine_lights, fingerprint
+        self.refine_lights, self.fingerprint, self.shadows = refine_lights, fingerprint, shadows
         self._resumed_rng: dict | None = None   # a checkpoint's RNG state, until the next step
-        self._interreflection_source: np.ndarray | None = None   # (H, W, 3) N_o of the last update
+        self._update_source: np.ndarray | None = None   # (H, W, 3) N_o of the last update
         self.mask_np = mask
         channels_last = torch.channels_last
         self.register_buffer("images", images.contiguous(memory_format=channels_last), persistent=False)
@@ -77,6 +100,7 @@ class InverseRendering(L.LightningModule):
                              else usable.contiguous(memory_format=channels_last), persistent=False)
         self.register_buffer("true_normals", None if true_normals is None else true_normals[None],
                              persistent=False)
+        self.register_buffer("visible", torch.ones(images.shape[0], 1, *mask.shape), persistent=False)
         n = images.shape[0]
         self.light_offsets = torch.nn.Parameter(torch.zeros(n, 3), requires_grad=refine_lights)
         self.light_log_scales = torch.nn.Parameter(torch.zeros(n), requires_grad=refine_lights)
@@ -114,7 +138,8 @@ class InverseRendering(L.LightningModule):
             specular = specular_map(normals, lights)
             reflectance = self.reflectance_net(inputs * self.mask, specular,
                                                self.reflectance_net.global_term(features))
-        reconstruction = scales[index, None, None, None] * reflectance * shading(pseudo, lights)
+        reconstruction = (scales[index, None, None, None] * self.visible[index] * reflectance
+                          * shading(pseudo, lights))
         return {"normals": normals, "pseudo_normals": pseudo, "reflectance": reflectance,
                 "reconstruction": reconstruction, "observed": observed, "specular": specular}
 
@@ -124,15 +149,14 @@ class InverseRendering(L.LightningModule):
         if self._resumed_rng is not None:   # here, as the data loader draws from it on resume
             restore_rng(self._resumed_rng, self.device)
             self._resumed_rng = None
-        every = self.schedule.update_every
-        if self.interreflection is not None and self.global_step % every == 0:
-            with stage("interreflection update"):
-                if self.global_step == 0:
-                    source = self.init_normals
-                else:
-                    with torch.no_grad():
-                        source = self.normals()[0]
-                self._update_interreflection(source[0].permute(1, 2, 0).double().cpu().numpy())
+        updating = self.interreflection is not None or self.shadows
+        if updating and self.global_step % self.schedule.update_every == 0:
+            if self.global_step == 0:
+                source = self.init_normals
+            else:
+                with torch.no_grad():
+                    source = self.normals()[0]
+            self._update(source[0].permute(1, 2, 0).double().cpu().numpy())
 
     def on_before_backward(self, loss) -> None:
         self._backward.start()
@@ -147,10 +171,16 @@ class InverseRendering(L.LightningModule):
         super().optimizer_step(*args, **kwargs)   # runs training_step and backward first
         self._optimiser.stop()
 
-    def _update_interreflection(self, normals: np.ndarray) -> None:
-        """Refresh the interreflection solve from (H, W, 3) normals, kept for checkpoints."""
-        self.interreflection.update(normals)
-        self._interreflection_source = normals
+    def _update(self, normals: np.ndarray) -> None:
+        """Refresh the interreflection solve and the cast shadows from (H, W, 3) normals, kept
+        for checkpoints."""
+        if self.interreflection is not None:
+            with stage("interreflection update"):
+                self.interreflection.update(normals)
+        if self.shadows:
+            with stage("cast shadows"):
+                self.visible = visibility(normals, self.mask_np, self.lights()[0]).to(self.visible)
+        self._update_source = normals
 
     def training_step(self, batch, batch_idx):
         s = self.schedule
@@ -198,16 +228,21 @@ class InverseRendering(L.LightningModule):
     def on_save_checkpoint(self, checkpoint: dict) -> None:
         checkpoint["unps_fingerprint"] = self.fingerprint
         checkpoint["unps_rng"] = rng_state(self.device)
-        if self._interreflection_source is not None:   # a tensor: checkpoints load weights-only
-            checkpoint["unps_interreflection_source"] = torch.from_numpy(self._interreflection_source)
+        if self._update_source is not None:   # a tensor: checkpoints load weights-only
+            checkpoint["unps_update_source"] = torch.from_numpy(self._update_source)
+        if self.shadows:                      # cast with the lights of then, refined or not
+            checkpoint["unps_visible"] = self.visible.cpu()
 
     def on_load_checkpoint(self, checkpoint: dict) -> None:
-        """Restore the generators and the interreflection solve as they were saved, so that a
-        finished fit, which runs no step when resumed, reads out exactly as it ended."""
+        """Restore the generators, the interreflection solve and the cast shadows as they were
+        saved, so that a finished fit, which runs no step when resumed, reads out exactly as it
+        ended."""
         self._resumed_rng = checkpoint.get("unps_rng")
-        source = checkpoint.get("unps_interreflection_source")
-        if source is not None and self.interreflection is not None:
-            self._update_interreflection(source.numpy())
+        source = checkpoint.get("unps_update_source")
+        if source is not None:
+            self._update(source.numpy())
+        if "unps_visible" in checkpoint:
+            self.visible = checkpoint["unps_visible"].to(self.visible)
 
     def train_dataloader(self):
         return torch.utils.data.DataLoader(range(self.schedule.steps), batch_size=None)
