@@ -214,7 +214,9 @@ def test_fit_writes_the_unps_outputs(tmp_path):
     assert metrics["normal_mae"] < 30
 
 
-def test_a_killed_fit_resumes_from_its_last_checkpoint_and_a_finished_one_reads_out_again(tmp_path, monkeypatch):
+@pytest.mark.parametrize("shadows", [[], ["preset.cast_shadows=true"]], ids=["plain", "cast_shadows"])
+def test_a_killed_fit_resumes_from_its_last_checkpoint_and_a_finished_one_reads_out_again(
+        tmp_path, monkeypatch, shadows):
     step = InverseRendering.training_step
 
     def dies_at_25(self, batch, batch_idx):
@@ -222,8 +224,9 @@ def test_a_killed_fit_resumes_from_its_last_checkpoint_and_a_finished_one_reads_
             raise RuntimeError("killed")   # as a crash; SIGKILL leaves the folder in the same state
         return step(self, batch, batch_idx)
 
+    overrides = [*tiny_overrides(steps=40), "light=gt", *shadows]
     monkeypatch.setattr(InverseRendering, "training_step", dies_at_25)
-    cfg = config(tmp_path, *tiny_overrides(steps=40), "light=gt")
+    cfg = config(tmp_path, *overrides)
     with pytest.raises(RuntimeError, match="killed"):
         fit(cfg)
     assert (tmp_path / "checkpoints" / "last.ckpt").is_file()
@@ -232,12 +235,12 @@ def test_a_killed_fit_resumes_from_its_last_checkpoint_and_a_finished_one_reads_
     metrics = fit(cfg)
     assert metrics["resumed_from_step"] == 20 and metrics["normal_mae"] < 30
     uninterrupted = tmp_path / "uninterrupted"
-    fit(config(uninterrupted, *tiny_overrides(steps=40), "light=gt"))
+    fit(config(uninterrupted, *overrides))
     np.testing.assert_array_equal(np.load(tmp_path / "normals.npy"), np.load(uninterrupted / "normals.npy"))
-    rerun = fit(config(uninterrupted, *tiny_overrides(steps=40), "light=gt"))   # a finished folder
+    rerun = fit(config(uninterrupted, *overrides))   # a finished folder
     assert rerun["resumed_from_step"] == 40
     np.testing.assert_array_equal(np.load(tmp_path / "normals.npy"), np.load(uninterrupted / "normals.npy"))
-    other = config(tmp_path, *tiny_overrides(steps=40), "light=gt", "preset.lr=1e-3")
+    other = config(tmp_path, *overrides, "preset.lr=1e-3")
     with pytest.raises(InputError, match="belongs to another run"):
         fit(other)
 
@@ -369,23 +372,3 @@ def test_visibility_hides_part_of_a_bowls_lit_side_from_a_low_light_and_none_of_
         assert least <= share <= most, (subject.name, share)
         if concave:                         # the rim nearer the light shades the +x side
             assert np.nonzero(hidden & lit)[1].mean() > subject.mask.shape[1] / 2
-
-
-def test_a_fit_with_cast_shadows_resumes_to_the_same_normals(tmp_path, monkeypatch):
-    step = InverseRendering.training_step
-
-    def dies_at_25(self, batch, batch_idx):
-        if self.global_step == 25:
-            raise RuntimeError("killed")
-        return step(self, batch, batch_idx)
-
-    overrides = [*tiny_overrides(steps=40), "light=gt", "preset.cast_shadows=true"]
-    monkeypatch.setattr(InverseRendering, "training_step", dies_at_25)
-    with pytest.raises(RuntimeError, match="killed"):
-        fit(config(tmp_path, *overrides))
-    monkeypatch.setattr(InverseRendering, "training_step", step)
-    metrics = fit(config(tmp_path, *overrides))
-    assert metrics["resumed_from_step"] == 20 and metrics["normal_mae"] < 30
-    fit(config(tmp_path / "uninterrupted", *overrides))
-    np.testing.assert_array_equal(np.load(tmp_path / "normals.npy"),
-                                  np.load(tmp_path / "uninterrupted" / "normals.npy"))
