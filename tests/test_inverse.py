@@ -64,6 +64,22 @@ def test_networks_shapes_unit_normals_and_initialisation():
     assert out.shape == (3, 3, 9, 11) and (out >= 0).all()
 
 
+def test_batch_norm_reads_out_with_the_statistics_it_was_fitted_with():
+    """Taniai & Maehara normalise with the batch's own statistics, in the fit and the read-out
+    alike: eval mode must not switch to running averages the fit never used."""
+    net = NormalNet(n_images=4, width=8, depth=3, batch_norm=True)
+    refl = ReflectanceNet(feature_width=8, width=4, batch_norm=True, branch=3)
+    assert sum(isinstance(m, torch.nn.BatchNorm2d) for m in [*net.modules(), *refl.modules()]) == 2 + 4
+    inputs = normal_net_input(torch.rand(4, 3, 6, 7), torch.ones(6, 7))
+    images, spec = torch.rand(2, 3, 6, 7), torch.rand(2, 1, 6, 7)
+    trained = [net(inputs)[0], refl(images, spec, refl.global_term(net(inputs)[1]))]
+    net.eval(), refl.eval()
+    read_out = [net(inputs)[0], refl(images, spec, refl.global_term(net(inputs)[1]))]
+    for a, b in zip(trained, read_out):
+        torch.testing.assert_close(a, b)
+    assert (read_out[1] >= 0).all() and read_out[1].shape == (2, 3, 6, 7)
+
+
 def test_the_global_term_equals_concatenating_the_features_to_every_image():
     refl = ReflectanceNet(feature_width=6, width=4)
     features, images, spec = torch.rand(1, 6, 7, 7), torch.rand(2, 3, 7, 7), torch.rand(2, 1, 7, 7)

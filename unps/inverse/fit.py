@@ -6,9 +6,8 @@
 
 The subject is cropped to its mask (and, when the preset caps the pixel count, block-averaged
 to a working grid); the robust initialisation gives N_init and the albedo P; the networks are
-fitted for ``steps`` Adam steps (:class:`unps.inverse.system.InverseRendering`); the normals
-come back on the subject's own grid (from a coarser working grid with the initialisation's
-finer detail added:
+fitted for ``steps`` Adam steps (:class:`unps.inverse.system.InverseRendering`); the normals come
+back on the subject's own grid (from a working grid with the initialisation's finer detail added:
 :func:`unps.inverse.grids.upsample_with_detail`). With an output folder, checkpoints land in
 ``checkpoints/`` every ``update_every`` steps and a rerun in the same folder resumes.
 """
@@ -49,7 +48,8 @@ class Preset:
     Attributes:
         name: label.
         width, depth, first_kernel: the normal network (:class:`NormalNet`).
-        reflectance_width, reflectance_depth: f_sp (:class:`ReflectanceNet`).
+        reflectance_width, reflectance_depth, reflectance_branch: f_sp (:class:`ReflectanceNet`).
+        batch_norm: batch normalisation in both networks (Taniai & Maehara's code).
         max_pixels: object pixels on the working grid; larger subjects are block-averaged by the
             smallest whole factor that fits, and the normals upsampled back. None = full resolution.
         cast_shadows: beyond the paper, render the shadows that the fitted surface casts, from its
@@ -63,14 +63,15 @@ class Preset:
     first_kernel: int = 3
     reflectance_width: int = 16
     reflectance_depth: int = 3
+    reflectance_branch: int = 3
     max_pixels: int | None = None
-    cast_shadows: bool = False
+    cast_shadows: bool = True
+    batch_norm: bool = True
     schedule: Schedule = Schedule()
 
     @classmethod
     def from_config(cls, **fields) -> Preset:
-        """From the flat ``preset`` config node (its ``_target_``): :class:`Schedule`'s keys go
-        to ``schedule``."""
+        """From the flat ``preset`` config node: :class:`Schedule`'s keys go to ``schedule``."""
         timing = {f.name for f in dataclasses.fields(Schedule)}
         return cls(**{k: v for k, v in fields.items() if k not in timing},
                    schedule=Schedule(**{k: v for k, v in fields.items() if k in timing}))
@@ -200,8 +201,9 @@ def build_system(work: Subject, light_directions: np.ndarray, preset: Preset,
                  "the robust initialisation's albedo" if stated is None
                  else f"interreflection.albedo={stated}")
 
-    normal_net = NormalNet(work.n_images, preset.width, preset.depth, preset.first_kernel)
-    reflectance_net = ReflectanceNet(preset.width, preset.reflectance_width, preset.reflectance_depth)
+    normal_net = NormalNet(work.n_images, preset.width, preset.depth, preset.first_kernel, preset.batch_norm)
+    reflectance_net = ReflectanceNet(preset.width, preset.reflectance_width, preset.reflectance_depth,
+                                     preset.batch_norm, preset.reflectance_branch)
     true_normals = (None if work.normals is None
                     else torch.as_tensor(work.normals).permute(2, 0, 1).contiguous())
     system = InverseRendering(

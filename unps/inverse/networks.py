@@ -30,6 +30,12 @@ def _conv(cin: int, cout: int, kernel: int) -> nn.Conv2d:
     return nn.Conv2d(cin, cout, kernel, padding=kernel // 2)
 
 
+def _norm(channels: int, batch_norm: bool) -> nn.Module:
+    """Batch normalisation over the current batch's pixels, never running averages (Taniai &
+    Maehara's: the same statistics in the fit and the read-out), or nothing."""
+    return nn.BatchNorm2d(channels, track_running_stats=False) if batch_norm else nn.Identity()
+
+
 def normal_net_input(images: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     """(n, 3, H, W) images and (H, W) mask → (1, 3n + 1, H, W), :class:`NormalNet`'s input.
 
@@ -54,13 +60,16 @@ class NormalNet(nn.Module):
         depth: convolutions in total (ξ_f and ξ_n1).
         first_kernel: kernel size of the first convolution (3 as the paper; 1 is 9× cheaper
             on the 3n-channel input).
+        batch_norm: normalise each of ξ_f's layers over the grid (Taniai & Maehara's code).
     """
 
-    def __init__(self, n_images: int, width: int = 384, depth: int = 4, first_kernel: int = 3):
+    def __init__(self, n_images: int, width: int = 384, depth: int = 4, first_kernel: int = 3,
+                 batch_norm: bool = False):
         super().__init__()
-        layers: list[nn.Module] = [_conv(3 * n_images + 1, width, first_kernel), nn.LeakyReLU(0.1)]
+        layers: list[nn.Module] = [_conv(3 * n_images + 1, width, first_kernel), _norm(width, batch_norm),
+                                   nn.LeakyReLU(0.1)]
         for _ in range(depth - 2):
-            layers += [_conv(width, width, 3), nn.LeakyReLU(0.1)]
+            layers += [_conv(width, width, 3), _norm(width, batch_norm), nn.LeakyReLU(0.1)]
         self.features = nn.Sequential(*layers)
         self.head = _conv(width, 3, 3)
         init_gaussian(self)
@@ -89,16 +98,25 @@ class ReflectanceNet(nn.Module):
     Args:
         feature_width: channels of the global features (NormalNet's width).
         width: channels of f_sp (16 in Taniai & Maehara).
-        depth: convolutions in total.
+        depth: convolutions after the global features join, the first layer's included.
+        branch: convolutions on [image ‖ specular map] alone, up to the first layer's (1: the
+            image meets the global features at once; Taniai & Maehara's code has 5).
+        batch_norm: normalise each hidden layer over the batch's images and pixels.
     """
 
-    def __init__(self, feature_width: int, width: int = 16, depth: int = 3):
+    def __init__(self, feature_width: int, width: int = 16, depth: int = 3, batch_norm: bool = False,
+                 branch: int = 1):
         super().__init__()
-        self.image_in = _conv(4, width, 3)
+        own: list[nn.Module] = []
+        for k in range(branch - 1):
+            own += [_conv(4 if k == 0 else width, width, 3), _norm(width, batch_norm), nn.LeakyReLU(0.1)]
+        self.image_branch = nn.Sequential(*own)
+        self.image_in = _conv(4 if branch == 1 else width, width, 3)
         self.feature_in = nn.Conv2d(feature_width, width, 3, padding=1, bias=False)
+        self.in_norm = _norm(width, batch_norm)
         layers: list[nn.Module] = []
         for _ in range(depth - 2):
-            layers += [_conv(width, width, 3), nn.LeakyReLU(0.1)]
+            layers += [_conv(width, width, 3), _norm(width, batch_norm), nn.LeakyReLU(0.1)]
         self.body = nn.Sequential(*layers)
         self.out = _conv(width, 3, 3)
         init_gaussian(self)
@@ -117,7 +135,8 @@ class ReflectanceNet(nn.Module):
         Returns:
             (B, 3, H, W) reflectance ≥ 0 (softplus).
         """
-        x = F.leaky_relu(self.image_in(torch.cat([images, specular], 1)) + shared, 0.1)
+        own = self.image_in(self.image_branch(torch.cat([images, specular], 1)))
+        x = F.leaky_relu(self.in_norm(own + shared), 0.1)
         return F.softplus(self.out(self.body(x)))
 
 
