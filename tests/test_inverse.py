@@ -1,6 +1,7 @@
 """The neural inverse rendering (method=unps): its pieces at tiny sizes, a short fit, resume."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -78,6 +79,16 @@ def test_batch_norm_reads_out_with_the_statistics_it_was_fitted_with():
     for a, b in zip(trained, read_out):
         torch.testing.assert_close(a, b)
     assert (read_out[1] >= 0).all() and read_out[1].shape == (2, 3, 6, 7)
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("reflectance_branch", 0, "preset.reflectance_branch must be a whole number >= 1, got 0"),
+    ("reflectance_branch", 2.5, "preset.reflectance_branch must be a whole number >= 1, got 2.5"),
+    ("batch_norm", "yes", "preset.batch_norm must be true or false, got 'yes'"),
+    ("cast_shadows", 1, "preset.cast_shadows must be true or false, got 1")])
+def test_a_preset_names_a_bad_network_setting(field, value, message):
+    with pytest.raises(InputError, match=re.escape(message)):
+        Preset.from_config(**{field: value})
 
 
 def test_the_global_term_equals_concatenating_the_features_to_every_image():

@@ -69,6 +69,15 @@ class Preset:
     batch_norm: bool = True
     schedule: Schedule = Schedule()
 
+    def __post_init__(self):
+        if isinstance(self.reflectance_branch, bool) or not isinstance(self.reflectance_branch, int) \
+                or self.reflectance_branch < 1:
+            raise InputError(f"preset.reflectance_branch must be a whole number >= 1, got "
+                             f"{self.reflectance_branch!r}")
+        for name in ("batch_norm", "cast_shadows"):
+            if not isinstance(getattr(self, name), bool):
+                raise InputError(f"preset.{name} must be true or false, got {getattr(self, name)!r}")
+
     @classmethod
     def from_config(cls, **fields) -> Preset:
         """From the flat ``preset`` config node: :class:`Schedule`'s keys go to ``schedule``."""
