@@ -288,7 +288,7 @@ def test_an_interrupted_run_resumes_with_its_own_config(tmp_path, monkeypatch):
     assert train(train_config(tmp_path / "longer", *longer), longer)["steps"] == 6
 
     other = (f"ckpt_path={last}", "light.width=16", "recipe.lr=0.1")
-    with pytest.raises(InputError, match=r"only recipe.max_steps and recipe.max_time may change, but "
+    with pytest.raises(InputError, match=r"only recipe.max_steps, recipe.max_time and device may change, but "
                                          r"the command line changes light.width \(8 in the run, 16 "
                                          r"asked\), recipe.lr"):
         train(train_config(tmp_path / "other", *other), other)

@@ -117,21 +117,21 @@ def cast_shadows(depth: torch.Tensor, mask: torch.Tensor, lights: torch.Tensor, 
 
     Args:
         depth: (H, W) float32 depth along +z, in units of which one pixel is ``pitch``.
-        mask: (H, W) bool object mask.
-        lights: (n, 3) unit directions, surface to light.
+        mask: (H, W) bool object mask, on ``depth``'s device.
+        lights: (n, 3) unit directions, surface to light, on ``depth``'s device.
         pitch: one pixel's size in depth units (1 when depth is in pixels).
         steps: samples along each ray.
         chunk: lights marched at once (memory grows as chunk × steps × object pixels).
 
     Returns:
-        (n, H, W) bool.
+        (n, H, W) bool, on ``depth``'s device.
     """
     h, w = depth.shape
-    out = torch.zeros(len(lights), h, w, dtype=torch.bool)
+    out = torch.zeros(len(lights), h, w, dtype=torch.bool, device=depth.device)
     rows, cols = torch.nonzero(mask, as_tuple=True)
     if not len(rows):
         return out
-    distance = torch.linspace(1, (h ** 2 + w ** 2) ** 0.5, steps)            # in pixels
+    distance = torch.linspace(1, (h ** 2 + w ** 2) ** 0.5, steps, device=depth.device)   # in pixels
     border = int(distance[-1]) + 2                  # off the image: a frame of −∞ around it
     surface = F.pad(torch.where(mask, depth, -torch.inf), (border,) * 4, value=-torch.inf)
     surface, width = surface.flatten(), w + 2 * border

@@ -23,12 +23,13 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from unps.cli import command_line
+from unps.device import describe, peak_memory_gb, resolve_device, trainer_placement
 from unps.errors import InputError, exit_on_bad_input
 
 log = logging.getLogger("unps.train")
 
 PROGRESS = (("loss", "train/loss", "{:.3f}"), ("validation direction error", "val/direction_mae", "{:.2f}°"))
-RUN_LENGTH = ("recipe.max_steps", "recipe.max_time")    # what the command line may change on resuming
+MAY_CHANGE = ("recipe.max_steps", "recipe.max_time", "device")   # on resuming: its length, where it runs
 NOT_THE_RUN = ("ckpt_path", "paths.output_dir")          # where to resume from and write, not what
 
 
@@ -43,7 +44,8 @@ def plain(value):
 
 
 def resumed_config(saved: dict, cfg: DictConfig, overrides: Sequence[str]) -> DictConfig:
-    """The config a run was started with, extended to the length the command line asks for.
+    """The config a run was started with, extended to the length (and moved to the device) the command
+    line asks for.
 
     Args:
         saved: the config stored in the run's checkpoint.
@@ -51,7 +53,7 @@ def resumed_config(saved: dict, cfg: DictConfig, overrides: Sequence[str]) -> Di
         overrides: the command line's overrides (``key=value``) that made ``cfg``.
 
     Raises:
-        InputError: an override other than :data:`RUN_LENGTH` that changes the saved config;
+        InputError: an override other than :data:`MAY_CHANGE` that changes the saved config;
             a resumed run keeps its data, network and optimiser.
     """
     resumed = OmegaConf.create(saved)
@@ -60,15 +62,16 @@ def resumed_config(saved: dict, cfg: DictConfig, overrides: Sequence[str]) -> Di
         if key in NOT_THE_RUN:
             continue
         wanted, kept = OmegaConf.select(cfg, key), OmegaConf.select(resumed, key)
-        if key in RUN_LENGTH:
+        if key in MAY_CHANGE:
             OmegaConf.update(resumed, key, wanted)
             if wanted != kept:
                 log.info("resuming with %s=%s (the run had %s)", key, wanted, kept)
         elif plain(wanted) != plain(kept):
             changed.append(f"{key} ({kept} in the run, {wanted} asked)")
     if changed:
-        raise InputError(f"{cfg.ckpt_path}: a resumed run keeps its config; only "
-                         f"{' and '.join(RUN_LENGTH)} may change, but the command line changes "
+        allowed = f"{', '.join(MAY_CHANGE[:-1])} and {MAY_CHANGE[-1]}"
+        raise InputError(f"{cfg.ckpt_path}: a resumed run keeps its config; only {allowed} may "
+                         f"change, but the command line changes "
                          f"{', '.join(changed)}. Start a new run with init_weights= to fine-tune "
                          f"with other settings")
     return resumed
@@ -100,7 +103,7 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
     Args:
         cfg: the composed ``train`` config.
         overrides: the command-line overrides that composed it; on resuming, those of
-            :data:`RUN_LENGTH` extend the run and any other change is refused.
+            :data:`MAY_CHANGE` extend the run and any other change is refused.
     """
     import lightning as L
     from lightning.pytorch.callbacks import LearningRateMonitor, ModelCheckpoint
@@ -129,7 +132,8 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
         raise InputError(f"seed must be a whole number, got {cfg.seed!r}")
     L.seed_everything(cfg.seed, workers=True, verbose=False)
     torch.set_num_threads(cfg.recipe.threads or torch.get_num_threads())
-    data = LightData(cfg.recipe, cfg.data, cfg.seed, start_step)
+    device = resolve_device(cfg.get("device", "auto"))   # runs saved before the option lack it
+    data = LightData(cfg.recipe, cfg.data, cfg.seed, start_step, device)
     data.setup("fit")   # errors in the data settings stop the run before the trainer starts
     net = instantiate(cfg.light, _partial_=True)()   # called here so errors reach the user
     if cfg.init_weights and not cfg.ckpt_path:
@@ -148,12 +152,12 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
                                    every_n_train_steps=cfg.recipe.val_every),
                    LightSamples(), LearningRateMonitor(),
                    ProgressLog(shown=PROGRESS, logger=log, after_validation=True)],
-        accelerator="auto", devices=1, log_every_n_steps=cfg.recipe.log_every,
+        **trainer_placement(device), log_every_n_steps=cfg.recipe.log_every,
         enable_progress_bar=False, enable_model_summary=False, deterministic=False)
-    log.info("training %s on %d threads: %d steps of %d samples (%d px, %d images), at most %s; "
-             "run folder %s", type(net).__name__, torch.get_num_threads(), cfg.recipe.max_steps,
-             cfg.recipe.batch_size, cfg.recipe.resolution, cfg.recipe.images,
-             cfg.recipe.max_time or "no time limit", out)
+    log.info("training %s on %s, %d threads: %d steps of %d samples (%d px, %d images), at most %s; "
+             "%s; run folder %s", type(net).__name__, describe(device), torch.get_num_threads(),
+             cfg.recipe.max_steps, cfg.recipe.batch_size, cfg.recipe.resolution, cfg.recipe.images,
+             cfg.recipe.max_time or "no time limit", data.workers_note(), out)
     start = time.perf_counter()
     with warnings.catch_warnings():
         for message in LIGHTNING_NOISE:
@@ -166,7 +170,8 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
                  trainer.global_step, cfg.recipe.max_steps, cfg.recipe.max_time,
                  out / "checkpoints" / "last.ckpt")
     metrics = {k: float(v) for k, v in trainer.callback_metrics.items()}
-    metrics.update(train_seconds=time.perf_counter() - start, steps=trainer.global_step)
+    metrics.update(train_seconds=time.perf_counter() - start, steps=trainer.global_step,
+                   device=describe(device), gpu_peak_gb=peak_memory_gb(device))
     write_json(out / "metrics.json", metrics)
     return metrics
 

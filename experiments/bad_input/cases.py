@@ -109,6 +109,8 @@ CASES = [
          lambda root: ["subject=lambertian", "light=gt", "noise=-1", *WOODHAM], 2, "noise"),
     Case("threads zero", "`threads=0`",
          lambda root: ["subject=lambertian", "light=gt", "threads=0", *WOODHAM], 2, "threads must be"),
+    Case("unknown device", "`device=gpu`",
+         lambda root: ["subject=lambertian", "light=gt", "device=gpu", *WOODHAM], 2, "device must be"),
     Case("refine without unps", "`light=refine method=woodham`",
          lambda root: ["subject=lambertian", "light=refine", *WOODHAM], 2, "needs method=unps"),
     Case("facet factor zero", "`interreflection.downsample=0` with `method=unps`",

@@ -7,7 +7,9 @@ Each case runs ``python -m unps.fit`` from the old source (a detached worktree, 
 ``compare.py`` makes it) and from this checkout, each in its own process with the same seed and
 thread count, and compares the two ``normals.npy`` bit for bit; where they differ it prints the
 largest angle between them. The cases: Woodham and the robust initialisation on DiLiGenT cat and
-on the analytic sphere, and a short ``method=unps`` fit (60 steps) on each.
+on the analytic sphere, and a short ``method=unps`` fit (60 steps) on each, all with the true
+lights; and Woodham on cat with the default lights (the network, the reversal test and the
+self-calibration).
 """
 
 from __future__ import annotations
@@ -37,13 +39,16 @@ CASES = {
     "woodham-cat": [*CAT, "method=woodham"],
     "rpca-cat": [*CAT, "method=rpca"],
     "unps-cat": [*CAT, *SHORT_UNPS],
+    "selfcal-cat": [*CAT, "method=woodham", "light=selfcal"],
 }
 
 
 def normals(source: Path, overrides: list[str], run_dir: Path) -> np.ndarray:
-    """``normals.npy`` of one fit run from ``source`` (light=gt, seed 0, 2 threads)."""
+    """``normals.npy`` of one fit run from ``source`` (light=gt unless the case names its lights, seed
+    0, 2 threads)."""
     shutil.rmtree(run_dir, ignore_errors=True)
-    command = [sys.executable, "-m", "unps.fit", *overrides, "light=gt", "seed=0", "threads=2",
+    lights = [] if any(o.startswith("light=") for o in overrides) else ["light=gt"]
+    command = [sys.executable, "-m", "unps.fit", *overrides, *lights, "seed=0", "threads=2",
                f"hydra.run.dir={run_dir}"]
     done = subprocess.run(command, cwd=source, env={**os.environ, "PYTHONPATH": str(source)},
                           capture_output=True, text=True)

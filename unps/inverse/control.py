@@ -15,6 +15,7 @@ import numpy as np
 import torch
 
 from unps.data.subject import Subject
+from unps.device import trainer_placement
 from unps.errors import Diverged, InputError, Interrupted
 
 if TYPE_CHECKING:
@@ -40,9 +41,10 @@ def fingerprint(subject: Subject, light_directions: np.ndarray, settings: dict) 
 
 
 def train(system: InverseRendering, schedule: Schedule, output_dir: str | Path | None,
-          name: str) -> tuple[float, int]:
-    """Run the schedule with Lightning, resuming from ``<output_dir>/checkpoints/last.ckpt`` when
-    it holds this run (same fingerprint); returns the seconds spent and the step resumed from.
+          name: str, device: torch.device = torch.device("cpu")) -> tuple[float, int]:
+    """Run the schedule with Lightning on ``device``, resuming from
+    ``<output_dir>/checkpoints/last.ckpt`` when it holds this run (same fingerprint); returns the
+    seconds spent and the step resumed from.
 
     Raises:
         InputError: the checkpoint belongs to another run.
@@ -73,7 +75,7 @@ def train(system: InverseRendering, schedule: Schedule, output_dir: str | Path |
             callbacks=[ModelCheckpoint(dirpath=out / "checkpoints", save_last=True, save_top_k=0,
                                        every_n_train_steps=schedule.update_every),
                        FitPictures(every=schedule.update_every), progress, watch])
-    trainer = L.Trainer(max_steps=schedule.steps, accelerator="auto", devices=1, log_every_n_steps=10,
+    trainer = L.Trainer(max_steps=schedule.steps, **trainer_placement(device), log_every_n_steps=10,
                         enable_model_summary=False, enable_progress_bar=False, num_sanity_val_steps=0,
                         **options)
     start = time.perf_counter()

@@ -24,6 +24,7 @@ import torch
 
 from unps.data.estimate import Estimate, Rendering
 from unps.data.subject import Subject
+from unps.device import resolve_device
 from unps.errors import InputError
 from unps.inverse.control import fingerprint, train
 from unps.inverse.grids import on_subject_grid, unclipped, upsample_with_detail, working_factor
@@ -113,7 +114,7 @@ class InterreflectionModel:
 
 def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, preset: Preset,
                              interreflection: InterreflectionModel, refine_lights: bool = False,
-                             output_dir: str | Path | None = None) -> Estimate:
+                             output_dir: str | Path | None = None, device: str = "auto") -> Estimate:
     """Fit the inverse-rendering networks to one subject.
 
     Args:
@@ -124,6 +125,8 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
         refine_lights: learn the lights jointly, starting from ``light_directions``.
         output_dir: run folder for checkpoints (resumed from when present) and TensorBoard;
             None keeps everything in memory.
+        device: where the fit runs, its robust initialisation and interreflection updates included
+            (:func:`unps.device.resolve_device`).
 
     Returns:
         Normals and albedo on the subject's grid, the refined lights when ``refine_lights``, the
@@ -132,6 +135,7 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
     settings = {"preset": preset.fields(), "interreflection": dataclasses.asdict(interreflection),
                 "refine_lights": refine_lights}
     schedule = preset.schedule
+    device = resolve_device(device)
     cropped = subject.crop_to_mask(CROP_MARGIN)
     factor = working_factor(int(cropped.mask.sum()), preset.max_pixels)
     work = cropped.downsample(factor)
@@ -145,13 +149,13 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
                  int((usable[:, work.mask] == 0).sum()), usable[:, work.mask].size)
     with stage("system assembly"):
         system, scale = build_system(work, light_directions, preset, interreflection, refine_lights,
-                                     fingerprint(work, light_directions, settings), usable)
+                                     fingerprint(work, light_directions, settings), usable, device)
     solver = system.interreflection
     parameters = sum(p.numel() for p in system.parameters() if p.requires_grad)
     log.info("networks: %.2f M parameters; %d steps", parameters / 1e6, schedule.steps)
 
     with stage("steps"):
-        seconds, resumed_from = train(system, schedule, output_dir, subject.name)
+        seconds, resumed_from = train(system, schedule, output_dir, subject.name, device)
     steps_run = schedule.steps - resumed_from
     log.info("fitted %d steps in %.1f s (%.3f s/step)", steps_run, seconds, seconds / max(steps_run, 1))
 
@@ -161,7 +165,7 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
         bend = interreflection_bend(normals, pseudo_normals, work.mask) if solver else None
         if factor > 1:
             coarse_init = system.init_normals[0].permute(1, 2, 0).cpu().numpy()
-            fine_init = robust_init(cropped, light_directions).normals
+            fine_init = robust_init(cropped, light_directions, device=device).normals
             normals = upsample_with_detail(normals, coarse_init, fine_init,
                                            work.mask, factor)
         directions, scales = rendering["light_directions"], rendering["light_scales"]
@@ -182,16 +186,17 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
 
 def build_system(work: Subject, light_directions: np.ndarray, preset: Preset,
                  interreflection: InterreflectionModel,
-                 refine_lights: bool, run_fingerprint: str, usable: np.ndarray | None = None
-                 ) -> tuple[InverseRendering, float]:
+                 refine_lights: bool, run_fingerprint: str, usable: np.ndarray | None = None,
+                 device: torch.device = torch.device("cpu")) -> tuple[InverseRendering, float]:
     """The robust initialisation, the networks and the interreflection solve for the working grid,
     around one :class:`InverseRendering`; also the white level the images were divided by.
-    ``usable``: (n, h, w) 1 for values the loss may use (:func:`unclipped`), None for all.
+    ``usable``: (n, h, w) 1 for values the loss may use (:func:`unclipped`), None for all;
+    ``device``: where the robust initialisation runs.
 
     Raises:
         InputError: the images are black on the object.
     """
-    init = robust_init(work, light_directions)
+    init = robust_init(work, light_directions, device=device)
     mask = work.mask
     scale = float(np.percentile(work.images[:, mask], 99))    # the white level: images in [0, ~1]
     if not scale > 0:

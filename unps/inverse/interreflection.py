@@ -29,7 +29,7 @@ import torch.nn.functional as F
 from unps.grid import block_mean
 from unps.errors import InputError
 from unps.geometry import integrate_normals
-from unps.solvers.nayar import interreflection_kernel
+from unps.solvers.nayar import interreflection_kernel, kernel_on_device
 
 log = logging.getLogger(__name__)
 
@@ -57,7 +57,7 @@ class Interreflection:
         self.albedo_full = torch.as_tensor(albedo, dtype=torch.float32)
         self.albedo = torch.as_tensor(facet_albedo[self.facets, 0], dtype=torch.float32)
         self.index = torch.as_tensor(np.flatnonzero(self.facets))
-        self.lu: torch.Tensor | None = None            # float64, CPU
+        self.lu: torch.Tensor | None = None            # float64, on the update's device
         self.pivots: torch.Tensor | None = None
         self._cache: dict = {}                         # the same, per (device, dtype) in use
 
@@ -70,17 +70,28 @@ class Interreflection:
         mean, _ = block_mean(normals, self.mask, self.factor)
         return mean / np.maximum(np.linalg.norm(mean, axis=-1, keepdims=True), 1e-12)
 
-    def update(self, normals: np.ndarray) -> None:
+    def update(self, normals: np.ndarray, device: torch.device = torch.device("cpu")) -> None:
         """Depth (Eq. 1) on the facet grid, K from it and the normals, and factorise (I − P K).
+
+        On a GPU the kernel, its visibility (the O(m²) part) and the factorisation are computed
+        there (:func:`unps.solvers.nayar.kernel_on_device`); the depth of the facet grid, a
+        sparse solve over m unknowns, stays on the CPU.
 
         Args:
             normals: (H, W, 3) unit normals on the working grid.
+            device: where the factors are computed and kept.
         """
         coarse = self.facet_normals(normals)
         depth = integrate_normals(coarse, self.facets)
-        kernel = interreflection_kernel(depth, coarse, self.facets, self.occlusion)
-        a = np.eye(len(kernel)) - self.albedo.double().numpy()[:, None] * kernel
-        self.lu, self.pivots = torch.linalg.lu_factor(torch.as_tensor(a, dtype=torch.float64))
+        if device.type == "cpu":
+            kernel = torch.as_tensor(interreflection_kernel(depth, coarse, self.facets, self.occlusion))
+        else:
+            on = dict(device=device, dtype=torch.float64)
+            kernel = kernel_on_device(torch.as_tensor(depth, **on), torch.as_tensor(coarse, **on),
+                                      torch.as_tensor(self.facets, device=device), self.occlusion)
+        a = torch.eye(len(kernel), dtype=torch.float64, device=device) \
+            - self.albedo.to(device, torch.float64)[:, None] * kernel
+        self.lu, self.pivots = torch.linalg.lu_factor(a)
         self._cache = {}
         log.debug("interreflection kernel: %d facets, mean row sum %.3f", len(kernel),
                   float(kernel.sum(1).mean()))

@@ -38,14 +38,16 @@ def visibility(normals: np.ndarray, mask: np.ndarray, directions: torch.Tensor) 
         normals: (H, W, 3) unit normals; their depth is integrated (in pixels) and marched
             toward each light with one sample per pixel of the grid's diagonal.
         mask: (H, W) bool.
-        directions: (n, 3) unit, surface to light.
+        directions: (n, 3) unit, surface to light; the shadows are marched on their device.
 
     Returns:
-        (n, 1, H, W) float32.
+        (n, 1, H, W) float32, on ``directions``' device.
     """
-    depth = torch.as_tensor(np.nan_to_num(integrate_normals(normals, mask)), dtype=torch.float32)
+    device = directions.device
+    depth = torch.as_tensor(np.nan_to_num(integrate_normals(normals, mask)), dtype=torch.float32,
+                            device=device)
     h, w = mask.shape
-    hidden = cast_shadows(depth, torch.as_tensor(mask), directions.detach().float().cpu(), 1.0,
+    hidden = cast_shadows(depth, torch.as_tensor(mask, device=device), directions.detach().float(), 1.0,
                           int(np.ceil(np.hypot(h, w))))
     return (~hidden).float()[:, None]
 
@@ -176,7 +178,7 @@ class InverseRendering(L.LightningModule):
         for checkpoints."""
         if self.interreflection is not None:
             with stage("interreflection update"):
-                self.interreflection.update(normals)
+                self.interreflection.update(normals, self.device)
         if self.shadows:
             with stage("cast shadows"):
                 self.visible = visibility(normals, self.mask_np, self.lights()[0]).to(self.visible)

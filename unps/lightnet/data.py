@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import logging
+
 import lightning as L
+import torch
 from torch.utils.data import DataLoader
 
 from unps.lightnet.materials import MaterialBank
@@ -11,6 +14,8 @@ from unps.lightnet.meshes import mesh_views
 from unps.lightnet.synthesis import LightDataset
 
 VALIDATION_SEED_OFFSET = 1_000_003   # validation stacks never share a (seed, index) with training
+
+log = logging.getLogger(__name__)
 
 
 class LightData(L.LightningDataModule):
@@ -26,11 +31,16 @@ class LightData(L.LightningDataModule):
         seed: the run's seed.
         start_step: the step training resumes from; its first ``start_step · batch_size`` items
             were seen before.
+        device: where the stacks are rendered. On a GPU they are rendered there, in the training
+            process (``recipe.workers`` is then not used: CUDA does not run in forked workers);
+            on the CPU, in ``recipe.workers`` worker processes.
     """
 
-    def __init__(self, recipe, data, seed: int, start_step: int = 0):
+    def __init__(self, recipe, data, seed: int, start_step: int = 0,
+                 device: torch.device = torch.device("cpu")):
         super().__init__()
         self.recipe, self.data, self.seed, self.start_step = recipe, data, seed, start_step
+        self.device = device
         self.train_set: LightDataset | None = None
         self.val_set: LightDataset | None = None
 
@@ -47,7 +57,7 @@ class LightData(L.LightningDataModule):
                       mesh_fraction=data.mesh_fraction, texture=data.texture,
                       perturbation=data.perturbation, saturation=data.saturation,
                       shapes=data.get("shapes"), layouts=data.get("layouts"),
-                      paint=data.get("paint", 0.0), camera=camera(data.get("camera")))
+                      paint=data.get("paint", 0.0), camera=camera(data.get("camera")), device=self.device)
         done = self.start_step * recipe.batch_size
         remaining = max(recipe.max_steps * recipe.batch_size - done, recipe.batch_size)
         self.train_set = LightDataset(length=remaining, seed=self.seed, offset=done, **common)
@@ -55,9 +65,15 @@ class LightData(L.LightningDataModule):
                                     **common)
 
     def _loader(self, dataset: LightDataset) -> DataLoader:
-        workers = self.recipe.workers
+        workers = self.recipe.workers if self.device.type == "cpu" else 0
         return DataLoader(dataset, batch_size=self.recipe.batch_size, num_workers=workers,
                           persistent_workers=workers > 0)
+
+    def workers_note(self) -> str:
+        """Where the stacks are rendered, for the log."""
+        if self.device.type != "cpu":
+            return f"training data rendered on {self.device} in this process"
+        return f"training data rendered in {self.recipe.workers} worker process(es)"
 
     def train_dataloader(self) -> DataLoader:
         return self._loader(self.train_set)

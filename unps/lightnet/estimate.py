@@ -11,6 +11,7 @@ import torch.nn.functional as F
 
 from unps.data.lights import Verdict
 from unps.data.subject import Subject
+from unps.device import resolve_device
 from unps.errors import InputError
 from unps.lightnet.bins import decode_lights
 from unps.lightnet.symmetry import SYMMETRIES, frame_matrix, mean_direction, transform_images
@@ -63,7 +64,8 @@ def network_input(images: np.ndarray, mask: np.ndarray, resolution: int, fill: f
 
 
 def network_lights(subject: Subject, checkpoint: str | None = None, soft_decode: bool = True,
-                   symmetric: bool = True, framings: Sequence[float] = FRAMINGS) -> tuple[Lights, Verdict]:
+                   symmetric: bool = True, framings: Sequence[float] = FRAMINGS,
+                   device: str | torch.device = "auto") -> tuple[Lights, Verdict]:
     """Directions and relative intensities of every image from the captured images alone: the
     first light stage of ``light=estimated`` (the others: :mod:`unps.lights.stages`).
 
@@ -77,6 +79,7 @@ def network_lights(subject: Subject, checkpoint: str | None = None, soft_decode:
         framings: how much of the network's square input the object fills (:func:`network_input`;
             beyond the paper), taken in turn with the symmetries (:func:`paired`) and averaged:
             the network is not scale-invariant, and its estimates at nearby scales err apart.
+        device: where the network runs (:func:`unps.device.resolve_device`).
 
     Raises:
         InputError: no ``framings``, or one outside (0, 1].
@@ -87,7 +90,8 @@ def network_lights(subject: Subject, checkpoint: str | None = None, soft_decode:
         network's verdict (``changed``: it replaces whatever lights the subject had).
     """
     framings = checked_framings(framings)
-    lights = network_estimate(subject, checkpoint, soft_decode, symmetric, framings)
+    lights = network_estimate(subject, checkpoint, soft_decode, symmetric, framings,
+                              resolve_device(device))
     passes = describe_passes(symmetric, framings)
     evidence = {}
     if lights.spread_deg is not None:
@@ -150,19 +154,22 @@ def warn_if_uncertain(spread: np.ndarray) -> None:
 
 @torch.no_grad()
 def network_estimate(subject: Subject, checkpoint: str | None, soft_decode: bool,
-                     symmetric: bool = False, framings: Sequence[float] = (1.0,)) -> Lights:
+                     symmetric: bool = False, framings: Sequence[float] = (1.0,),
+                     device: torch.device = torch.device("cpu")) -> Lights:
     """The light network's directions and intensities (mean 1, repeated for RGB).
 
     Passes over the framings (:func:`network_input`'s ``fill``) and, with ``symmetric``, the
     eight symmetries of the square (:mod:`unps.lightnet.symmetry`, each answer mapped back),
     taken in turn (:func:`paired`); more than one pass gives their mean, and their spread in
-    ``spread_deg``.
+    ``spread_deg``. The passes run on ``device``.
     """
     net, config = load_lightnet(checkpoint)
+    net = net.to(device)
     resolution = config["recipe"]["resolution"]
     observed = subject.observed_images()
     frames = SYMMETRIES if symmetric else ((0, False),)
-    inputs = {fill: network_input(observed, subject.mask, resolution, fill) for fill in framings}
+    inputs = {fill: [t.to(device) for t in network_input(observed, subject.mask, resolution, fill)]
+              for fill in framings}
     estimates = [network_pass(net, *inputs[fill], *frame, soft_decode=soft_decode)
                  for fill, frame in paired(framings, frames)]
     spread = None
@@ -172,9 +179,9 @@ def network_estimate(subject: Subject, checkpoint: str | None, soft_decode: bool
         intensities = intensities.mean(0) / intensities.mean()
     else:
         (directions, intensities), = estimates
-    return Lights(directions.numpy().astype(np.float32),
-                  intensities[:, None].repeat(1, 3).numpy().astype(np.float32), "estimated",
-                  spread_deg=None if spread is None else spread.numpy())
+    return Lights(directions.cpu().numpy().astype(np.float32),
+                  intensities[:, None].repeat(1, 3).cpu().numpy().astype(np.float32), "estimated",
+                  spread_deg=None if spread is None else spread.cpu().numpy())
 
 
 @torch.no_grad()
@@ -192,7 +199,7 @@ def network_pass(net: torch.nn.Module, images: torch.Tensor, mask: torch.Tensor,
     logits = net(transform_images(images, turns, mirror), transform_images(mask, turns, mirror))
     seen, relative = decode_lights(logits["azimuth"], logits["elevation"], logits["intensity"],
                                    soft_decode)
-    return seen[0] @ frame_matrix(turns, mirror), relative[0] / relative[0].mean()   # Mᵀ·l per row
+    return seen[0] @ frame_matrix(turns, mirror).to(seen), relative[0] / relative[0].mean()   # Mᵀ·l per row
 
 
 def paired(framings: Sequence[float], frames: Sequence) -> list[tuple[float, object]]:

@@ -111,9 +111,11 @@ def rasterise(points: torch.Tensor, normals: torch.Tensor, resolution: int,
     pixel = row * resolution + col
     depth = torch.full((resolution * resolution,), -torch.inf).scatter_reduce(
         0, pixel, points[:, 2], "amax")
-    front = points[:, 2] >= depth[pixel]
+    front = torch.nonzero(points[:, 2] >= depth[pixel]).squeeze(1)
+    # of the points tied for nearest, the last: a plain indexed write would leave it to the threads
+    last = torch.full((resolution * resolution,), -1).scatter_reduce(0, pixel[front], front, "amax")
     normal = torch.zeros(resolution * resolution, 3)
-    normal[pixel[front]] = normals[front]
+    normal[last >= 0] = normals[last[last >= 0]]
     depth, normal = depth.view(resolution, resolution), normal.view(resolution, resolution, 3)
     hit = torch.isfinite(depth)
     holes = _filled(hit) & ~hit

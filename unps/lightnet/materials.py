@@ -20,16 +20,18 @@ def shade(maps: ShapeMaps, brdf, lights: torch.Tensor, intensities: torch.Tensor
     """Radiance e · f(l, v) · max(n·l, 0), in shadow 0.
 
     Args:
-        lights: (n, 3); intensities: (n,); albedo: optional (H, W) or (H, W, 3) multiplier.
+        lights: (n, 3); intensities: (n,); albedo: optional (H, W) or (H, W, 3) multiplier; all on
+            the device of ``maps`` and ``brdf``.
 
     Returns:
-        (n, 3, H, W) float32.
+        (n, 3, H, W) float32, on that device.
     """
     m = maps.mask
     n = maps.normals[m]                                               # (P, 3)
     tangent = F.normalize(torch.linalg.cross(torch.where(n[:, :1].abs() < 0.9,
-                                                         torch.tensor([1.0, 0, 0]),
-                                                         torch.tensor([0, 1.0, 0])), n), dim=-1)
+                                                         torch.tensor([1.0, 0, 0], device=n.device),
+                                                         torch.tensor([0, 1.0, 0], device=n.device)), n),
+                          dim=-1)
     bitangent = torch.linalg.cross(n, tangent)
     frame = torch.stack([tangent, bitangent, n], 1)                   # (P, 3, 3) rows
     wi = torch.einsum("pij,lj->lpi", frame, lights)                   # (L, P, 3)
@@ -41,7 +43,7 @@ def shade(maps: ShapeMaps, brdf, lights: torch.Tensor, intensities: torch.Tensor
     value = value * intensities[:, None, None]
     if shadows:
         value = value * (~cast_shadows(maps, lights)[:, m])[..., None]
-    images = torch.zeros(len(lights), *m.shape, 3)
+    images = torch.zeros(len(lights), *m.shape, 3, device=m.device)
     images[:, m] = value
     return images.permute(0, 3, 1, 2)
 

@@ -114,7 +114,9 @@ def record(images: torch.Tensor, camera: Camera, generator: torch.Generator) -> 
     """A stack scaled to a 99th percentile of 1, as the camera stores it.
 
     Args:
-        images: (n, 3, H, W) radiance, 99th percentile of the object's values 1.
+        images: (n, 3, H, W) radiance, 99th percentile of the object's values 1, on any device.
+        generator: a CPU generator; every draw is made on the CPU (the same numbers on any
+            device) and the noise moved to the images' device.
 
     Returns:
         (n, 3, H, W) in [0, 1]: exposed, noisy, clipped at full scale and quantised.
@@ -124,7 +126,8 @@ def record(images: torch.Tensor, camera: Camera, generator: torch.Generator) -> 
     values = images * 10 ** (low + (high - low) * float(u(1)))
     sigma = torch.sqrt(camera.shot_noise * float(u(1)) * values.clamp_min(0)
                        + (camera.read_noise * float(u(1))) ** 2)
-    values = (values + sigma * torch.randn(values.shape, generator=generator)).clamp(0, 1)
+    noise = torch.randn(values.shape, generator=generator).to(values.device)
+    values = (values + sigma * noise).clamp(0, 1)
     names = [name for name in FORMATS if camera.formats.get(name, 0) > 0]
     p = torch.tensor([camera.formats[name] for name in names], dtype=torch.float64)
     return quantize(values, names[int(torch.multinomial(p / p.sum(), 1, generator=generator))])

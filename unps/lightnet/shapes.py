@@ -27,6 +27,10 @@ class ShapeMaps:
     depth: torch.Tensor
     mask: torch.Tensor
 
+    def to(self, device: torch.device) -> ShapeMaps:
+        """The same maps on ``device``."""
+        return ShapeMaps(self.normals.to(device), self.depth.to(device), self.mask.to(device))
+
 
 def sample_generator(seed: int, index: int) -> torch.Generator:
     digest = hashlib.sha256(f"{seed}:{index}".encode()).digest()

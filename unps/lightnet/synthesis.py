@@ -50,6 +50,9 @@ class LightDataset(Dataset):
         family: force one material family (for per-family validation).
         shape: force one shape family (for per-family validation).
         offset: item i is sample ``offset + i`` (a resumed run continues where it stopped).
+        device: where a sample is rendered (shading, cast shadows, camera) and returned. Its
+            random draws are made on the CPU in every case, so a sample is the same function of
+            (seed, index) on any device: bit for bit on the CPU, to float rounding on a GPU.
     """
 
     def __init__(self, length: int, resolution: int = 128, images: int = 32,
@@ -59,7 +62,8 @@ class LightDataset(Dataset):
                  intensity_range: tuple[float, float] = (0.2, 2.0), saturation: float | None = 4.0,
                  shapes: dict[str, float] | None = None, layouts: dict[str, float] | None = None,
                  camera: Camera | None = None, seed: int = 0, family: str | None = None,
-                 shape: str | None = None, offset: int = 0, paint: float = 0.0):
+                 shape: str | None = None, offset: int = 0, paint: float = 0.0,
+                 device: torch.device = torch.device("cpu")):
         if resolution % 32 or resolution < 32:
             raise InputError(f"resolution must be a multiple of 32, got {resolution}")
         if not 1 <= images <= lights_per_shape:
@@ -79,7 +83,7 @@ class LightDataset(Dataset):
         self.meshes, self.mesh_fraction = meshes or [], mesh_fraction if meshes else 0.0
         self.texture, self.paint, self.perturbation = texture, paint, perturbation
         self.intensity_range, self.seed, self.family = intensity_range, seed, family
-        self.offset, self.saturation = offset, saturation
+        self.offset, self.saturation, self.device = offset, saturation, torch.device(device)
 
     def __len__(self) -> int:
         return self.length
@@ -95,12 +99,14 @@ class LightDataset(Dataset):
                 raise InputError(f"mesh views are {maps.depth.shape[0]} px, data {self.resolution} px")
         else:
             maps = draw_shape(self.shapes, self.resolution, g, self.shape)
+        maps = maps.to(self.device)
         family, brdf = self.materials.draw(g, self.family)
+        brdf = brdf.to(self.device)
         lights = draw_lights(self.layouts, self.lights_per_shape, self.max_zenith_deg, g)
         pick = torch.randperm(self.lights_per_shape, generator=g)[: self.images]
-        lights = lights[pick]
+        lights = lights[pick].to(self.device)
         lo, hi = self.intensity_range
-        intensities = lo + (hi - lo) * u(self.images)
+        intensities = (lo + (hi - lo) * u(self.images)).to(self.device)
         albedo = None
         if self.texture > 0:
             coarse = torch.rand(1, 1, 6, 6, generator=g) - 0.5
@@ -109,7 +115,7 @@ class LightDataset(Dataset):
         if self.paint > 0 and float(u(1)) < self.paint:
             paint = painted(self.resolution, g)
             albedo = paint if albedo is None else albedo[..., None] * paint
-        images = shade(maps, brdf, lights, intensities, albedo)
+        images = shade(maps, brdf, lights, intensities, None if albedo is None else albedo.to(self.device))
         values = images[:, :, maps.mask].flatten()
         level = torch.quantile(values[:: max(1, len(values) // 8192)], 0.99).clamp_min(1e-8)
         images = images / level
@@ -118,7 +124,8 @@ class LightDataset(Dataset):
         else:
             if self.saturation is not None:
                 images = images.clamp(max=self.saturation)
-            images = images + self.perturbation * (2 * torch.rand(images.shape, generator=g) - 1)
+            uniform = torch.rand(images.shape, generator=g).to(self.device)
+            images = images + self.perturbation * (2 * uniform - 1)
         images = images * maps.mask
         return {"images": images.float(), "mask": maps.mask[None].float(),
                 "directions": lights.float(), "intensities": intensities.float(),

@@ -110,16 +110,18 @@ class ContourAlignment:
 
     Attributes:
         min_rotation, max_rotation: degrees.
+        device: where the robust initialisation runs (the run's ``device=``).
     """
 
     name: ClassVar[str] = "contour"
     min_rotation: float = MIN_ROTATION
     max_rotation: float = MAX_ROTATION
+    device: str = "auto"
 
     def __call__(self, subject: Subject, lights: Lights) -> tuple[Lights, Verdict]:
         """The lights with every direction rotated by :func:`contour_rotation` (intensities
         unchanged), or as given when that finds no rotation it can trust; and the verdict."""
-        normals = robust_init(with_lights(subject, lights), lights.directions).normals
+        normals = robust_init(with_lights(subject, lights), lights.directions, device=self.device).normals
         rotation, basis = contour_rotation(normals, subject.mask)
         if rotation is None:
             return lights, Verdict(self.name, "declined", basis)

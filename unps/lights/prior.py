@@ -44,6 +44,11 @@ class NetworkPrior:
     weight: float
     intensity_sigma: float
 
+    def to(self, device: torch.device) -> NetworkPrior:
+        """The same prior with its tensors on ``device``."""
+        return NetworkPrior(self.directions.to(device), self.weights.to(device), self.weight,
+                            self.intensity_sigma)
+
     def cost(self, directions: torch.Tensor, intensities: torch.Tensor) -> torch.Tensor:
         """The pull on (n, 3) unit ``directions`` and (n,) ``intensities`` (geometric mean 1),
         differentiable in both.

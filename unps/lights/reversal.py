@@ -31,6 +31,7 @@ import torch
 from unps.data.subject import Subject
 from unps.geometry import cast_shadows, integrate_normals
 from unps.data.lights import Verdict
+from unps.device import resolve_device
 from unps.lights import Lights, with_lights
 from unps.solvers.rpca import robust_init
 from unps.solvers.woodham import rgb_albedo, to_maps
@@ -108,7 +109,7 @@ class ShadowEvidence:
 
 
 def shadow_evidence(subject: Subject, lights: Lights, normals: np.ndarray,
-                    max_pixels: int = 4000) -> ShadowEvidence:
+                    max_pixels: int = 4000, device: torch.device = torch.device("cpu")) -> ShadowEvidence:
     """Compare the shadows cast under the lights as they are and half a turn about the view.
 
     The subject and the normals are cropped to its mask and block-averaged to at most
@@ -119,6 +120,7 @@ def shadow_evidence(subject: Subject, lights: Lights, normals: np.ndarray,
         subject: its captured images and mask.
         lights: (n, 3) unit directions and intensities (or None) to test.
         normals: (H, W, 3) unit normals estimated with ``lights`` (the robust initialisation's).
+        device: where the shadows are marched.
     """
     observed = with_lights(subject, lights).replace(normals=normals, depth=None)
     factor = max(1, int(np.ceil(np.sqrt(observed.mask.sum() / max_pixels))))
@@ -129,12 +131,13 @@ def shadow_evidence(subject: Subject, lights: Lights, normals: np.ndarray,
     shading = np.einsum("hwc,nc->nhw", grid.normals, directions)                # (n, H, W)
     lit = (shading > LIT) & grid.mask[None]
     dark = lit & (grid.images.mean(-1) < DARK * albedo.mean(-1)[None] * shading)
-    depth = torch.as_tensor(np.nan_to_num(integrate_normals(grid.normals, grid.mask)))
-    mask = torch.as_tensor(grid.mask)
+    depth = torch.as_tensor(np.nan_to_num(integrate_normals(grid.normals, grid.mask)), device=device)
+    mask = torch.as_tensor(grid.mask, device=device)
     steps = int(np.ceil(np.hypot(*grid.mask.shape)))                          # one per pixel
-    current = cast_shadows(depth, mask, torch.as_tensor(directions).float(), 1.0, steps).numpy()
-    turned = torch.as_tensor(directions @ HALF_TURN).float()
-    reversed_ = cast_shadows(-depth, mask, turned, 1.0, steps).numpy()
+    current = cast_shadows(depth, mask, torch.as_tensor(directions, device=device).float(), 1.0,
+                           steps).cpu().numpy()
+    turned = torch.as_tensor(directions @ HALF_TURN, device=device).float()
+    reversed_ = cast_shadows(-depth, mask, turned, 1.0, steps).cpu().numpy()
     only_current, only_reversed = lit & current & ~reversed_, lit & reversed_ & ~current
     neither = lit & ~current & ~reversed_
     base = (dark.sum() + 1) / (lit.sum() + 2)
@@ -170,12 +173,14 @@ class ReversalTest:
         contrast: how many times more often than expected of their pixels, and than the current
             reading's shadows, they must be dark.
         min_pairs: pairs of pixel and image in the reversed reading's own shadows, at least.
+        device: where the robust initialisation and the shadows run (the run's ``device=``).
     """
 
     name: ClassVar[str] = "reversal"
     hit_rate: float = 0.3
     contrast: float = 4.0
     min_pairs: int = 50
+    device: str = "auto"
 
     def favours_reversal(self, evidence: ShadowEvidence) -> bool:
         """Whether the evidence is positive for the reversed reading (see the class)."""
@@ -195,8 +200,9 @@ class ReversalTest:
             :meth:`favours_reversal`, else ``lights`` itself (intensities unchanged); and the
             verdict with the counts of :class:`ShadowEvidence`.
         """
-        normals = robust_init(with_lights(subject, lights), lights.directions).normals
-        evidence = shadow_evidence(subject, lights, normals)
+        device = resolve_device(self.device)
+        normals = robust_init(with_lights(subject, lights), lights.directions, device=device).normals
+        evidence = shadow_evidence(subject, lights, normals, device=device)
         if not self.favours_reversal(evidence):
             return lights, Verdict(self.name, "kept", "the cast shadows do not say the lights read "
                                    "the surface inside out (" + evidence.describe() + ")",

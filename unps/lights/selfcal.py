@@ -33,6 +33,7 @@ import torch
 
 from unps.data.lights import Verdict
 from unps.data.subject import Subject
+from unps.device import resolve_device
 from unps.errors import InputError
 from unps.geometry import integrate_normals
 from unps.lights import Lights, with_lights
@@ -68,6 +69,7 @@ class SelfCalibration:
         prior_floor_deg: σ₀, the first guess's error where the network's passes agree.
         prior_intensity: σ_e, the first guess's relative intensity error.
         log_every: steps between progress lines.
+        device: where the fit runs (the run's ``device=``, :func:`unps.device.resolve_device`).
     """
 
     steps: int = 1500
@@ -83,6 +85,7 @@ class SelfCalibration:
     prior_floor_deg: float = 3.0
     prior_intensity: float = 0.1
     log_every: int = 500
+    device: str = "auto"
 
     name: ClassVar[str] = "selfcal"
 
@@ -124,11 +127,12 @@ def self_calibrate(subject: Subject, lights: Lights,
     grid = working_grid(observed, normals_under(gray, first_guess), settings.max_pixels)
     target = torch.as_tensor(grid.images[:, grid.mask]).permute(1, 0, 2).float()  # (m, n, 3)
     target = target / torch.quantile(target.flatten()[::7], 0.99).clamp_min(1e-12)
-    model = initial_model(grid, target, first_guess, settings)
+    device = resolve_device(settings.device)
+    model = initial_model(grid, target, first_guess, settings).to(device)
     prior = network_prior(lights, settings.prior_weight, settings.prior_floor_deg,
                           settings.prior_intensity)
-    loss, pull = fit(model, target, settings, prior)
-    directions, scales = (t.detach().numpy().astype(np.float64) for t in model.lights())
+    loss, pull = fit(model, target.to(device), settings, None if prior is None else prior.to(device))
+    directions, scales = (t.detach().cpu().numpy().astype(np.float64) for t in model.lights())
     if not (np.isfinite(loss) and np.all(np.isfinite(directions))):
         log.warning("self-calibration of %s diverged; keeping the first guess", subject.name)
         return lights, Verdict(settings.name, "declined", "the fit diverged", {"loss": loss})
@@ -213,7 +217,7 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
         dict(params=[model.columns, model.gbr, model.light_residual], lr=settings.lr_lights)])
 
     def total(visible: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
-        pull = prior.cost(*model.lights()) if prior is not None else torch.zeros(())
+        pull = prior.cost(*model.lights()) if prior is not None else torch.zeros((), device=target.device)
         return objective(model, target, settings, visible) + pull, pull
 
     for step in range(settings.steps):

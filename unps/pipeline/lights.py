@@ -21,10 +21,11 @@ def estimated_lights(subject: Subject, checkpoint: str | None = None, soft_decod
                      stages: Sequence[str] = ("reversal",),
                      reversal: ReversalTest | None = ReversalTest(),
                      contour: ContourAlignment | None = ContourAlignment(),
-                     selfcal: SelfCalibration | None = SelfCalibration()) -> Lights:
+                     selfcal: SelfCalibration | None = SelfCalibration(),
+                     device: str = "auto") -> Lights:
     """The network's lights (:func:`unps.lightnet.estimate.network_lights`, with ``checkpoint``,
-    ``soft_decode``, ``symmetric`` and ``framings``), then each stage named in ``stages`` in turn,
-    with the settings given for it.
+    ``soft_decode``, ``symmetric`` and ``framings``, on ``device``), then each stage named in
+    ``stages`` in turn, with the settings given for it (each its own ``device``).
 
     Raises:
         InputError: a stage that is unknown, named twice or without settings (before any work).
@@ -34,5 +35,5 @@ def estimated_lights(subject: Subject, checkpoint: str | None = None, soft_decod
     """
     chosen = select_stages(stages, {"reversal": reversal, "contour": contour, "selfcal": selfcal})
     with stage("light network"):
-        lights, verdict = network_lights(subject, checkpoint, soft_decode, symmetric, framings)
+        lights, verdict = network_lights(subject, checkpoint, soft_decode, symmetric, framings, device)
     return run_stages(subject, record(lights, verdict, subject), chosen)

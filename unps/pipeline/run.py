@@ -16,6 +16,7 @@ from omegaconf import DictConfig, OmegaConf
 from unps.allocator import keep_freed_memory
 from unps.data.checks import check_light_span, collected_warnings, usable_subject
 from unps.data.prepare import add_noise
+from unps.device import describe, peak_memory_gb, resolve_device
 from unps.errors import InputError
 from unps.geometry import integrate_normals
 from unps.lights import Lights, ground_truth, light_errors, with_lights
@@ -73,6 +74,7 @@ def run_fit(cfg: DictConfig, seconds: dict[str, float], warnings: list[str]) -> 
         raise InputError(f"seed must be a whole number, got {cfg.seed!r}")
     seed_everything(cfg.seed, workers=True, verbose=False)
     threads, source = set_fit_threads(cfg.get("threads"), launcher_config())
+    device = resolve_device(cfg.device)                   # checked before anything is read
     keep_freed_memory()
     out = Path(cfg.paths.output_dir)
     start = time.perf_counter()
@@ -100,8 +102,9 @@ def run_fit(cfg: DictConfig, seconds: dict[str, float], warnings: list[str]) -> 
         subject = with_lights(subject, lights)
     h, w = subject.resolution
     log.info("%s: %d images, %d×%d pixels (%d on the object), read in %.1f s; lights: %s; "
-             "method: %s; %d torch threads (%s)", subject.name, subject.n_images, w, h,
-             subject.mask.sum(), time.perf_counter() - start, light_name, method_name, threads, source)
+             "method: %s; device %s, %d torch threads (%s)", subject.name, subject.n_images, w, h,
+             subject.mask.sum(), time.perf_counter() - start, light_name, method_name, describe(device),
+             threads, source)
 
     start = time.perf_counter()
     with stage("method"):
@@ -122,6 +125,7 @@ def run_fit(cfg: DictConfig, seconds: dict[str, float], warnings: list[str]) -> 
                "subject": subject.name, "method": method_name, "light": light_name,
                "noise": cfg.noise, "noise_reference": noise_reference,
                "runtime_s": runtime, "n_images": subject.n_images, "resolution": [h, w],
+               "device": describe(device), "gpu_peak_gb": peak_memory_gb(device),
                **light_metrics}
     metrics.update(estimate.info)
     error = None

@@ -20,6 +20,7 @@ import torch
 
 from unps.data.estimate import Estimate
 from unps.data.subject import Subject
+from unps.device import resolve_device
 from unps.errors import InputError
 from unps.timing import stage
 from unps.solvers.woodham import (lambertian_least_squares, normals_from_scaled,
@@ -68,7 +69,8 @@ class RPCAResult:
 
 def partial_sum_rpca(x: np.ndarray, rank: int = 3, lam: float | None = None,
                      tol: float = 1e-4, max_iter: int = 500, rho: float = 1.5,
-                     dtype: torch.dtype = torch.float32) -> RPCAResult:
+                     dtype: torch.dtype = torch.float32,
+                     device: torch.device = torch.device("cpu")) -> RPCAResult:
     """Split X into a matrix whose singular values beyond ``rank`` are small, plus sparse E.
 
     Inexact augmented Lagrangian / ADMM with an increasing penalty μ (Lin et al. 2010):
@@ -86,9 +88,10 @@ def partial_sum_rpca(x: np.ndarray, rank: int = 3, lam: float | None = None,
         max_iter: iteration limit.
         rho: growth factor of μ.
         dtype: float32 (fast) or float64.
+        device: where the iterations run; the result comes back as numpy.
     """
     transpose = x.shape[0] < x.shape[1]
-    x = torch.as_tensor(np.asarray(x).T if transpose else np.asarray(x), dtype=dtype)
+    x = torch.as_tensor(np.asarray(x).T if transpose else np.asarray(x), dtype=dtype, device=device)
     lam = 1.0 / np.sqrt(max(x.shape)) if lam is None else float(lam)
     norm_x = torch.linalg.norm(x)
     spectral = torch.linalg.eigvalsh((x.T @ x).double())[-1].sqrt().item()
@@ -115,25 +118,28 @@ def partial_sum_rpca(x: np.ndarray, rank: int = 3, lam: float | None = None,
     else:
         log.warning("partial-sum RPCA stopped after %d iterations at relative residual %.2e "
                     "(tolerance %.1e)", max_iter, residual, tol)
-    z, e = z.double().numpy(), e.double().numpy()
+    z, e = z.double().cpu().numpy(), e.double().cpu().numpy()
     return RPCAResult(z.T if transpose else z, e.T if transpose else e, it, residual)
 
 
 @stage("robust initialisation")
 def robust_init(subject: Subject, light_directions: np.ndarray, rank: int = 3,
-                lam: float | None = None, tol: float = 1e-4, max_iter: int = 500) -> Estimate:
+                lam: float | None = None, tol: float = 1e-4, max_iter: int = 500,
+                device: str | torch.device = "auto") -> Estimate:
     """Normals and albedo from the low-rank part of the gray image matrix.
 
     Args:
         subject: images divided by their intensities.
         light_directions: (n, 3) unit, surface to light, unps frame (given or estimated).
         rank, lam, tol, max_iter: see :func:`partial_sum_rpca`.
+        device: where the RPCA iterates (``device=`` option, :func:`unps.device.resolve_device`).
     """
     pixels = subject.images[:, subject.mask]                          # (n, m, 3)
     if not np.any(pixels > 0):
         raise InputError(f"subject {subject.name!r}: every image is black on the object, so there "
                          f"is nothing to solve")
-    result = partial_sum_rpca(pixels.mean(-1).T, rank, lam, tol, max_iter)
+    result = partial_sum_rpca(pixels.mean(-1).T, rank, lam, tol, max_iter,
+                              device=resolve_device(device))
     log.info("robust init: %d ADMM iterations, residual %.1e, %.1f%% of entries are outliers",
              result.iterations, result.residual, 100 * np.mean(result.sparse != 0))
     b = lambertian_least_squares(result.low_rank.T, light_directions)
