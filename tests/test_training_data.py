@@ -7,13 +7,16 @@ import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
+from omegaconf import OmegaConf
+from torch.utils.data import DataLoader, default_collate
 
 from unps.errors import InputError
 from unps.io.images import read_image, write_png16
 from unps.lightnet import lathe
-from unps.lightnet.rig import FORMATS, LAYOUTS, Camera, draw_lights, quantize, record
+from unps.lightnet.rig import FORMATS, LAYOUTS, Camera, draw_lights, expose, quantize, record
 from unps.lightnet.shapes import SHAPES, sample_generator
-from unps.lightnet.synthesis import LightDataset
+from unps.lightnet.data import Draws, LightData
+from unps.lightnet.synthesis import LightDataset, Scene, render
 
 
 def concave_share(depth: torch.Tensor, mask: torch.Tensor) -> float:
@@ -152,13 +155,14 @@ def test_the_camera_saturates_at_full_scale_and_stores_levels():
     images = torch.rand(4, 3, 32, 32) * 2                      # 99th percentile near 2
     fixed = dict(exposure=(0.0, 0.0), read_noise=0.0, shot_noise=0.0)
     for storage in FORMATS:
-        out = record(images, Camera(**fixed, formats={storage: 1.0}), sample_generator(0, 0))
+        camera = Camera(**fixed, formats={storage: 1.0})
+        out = record(images, expose(camera, images.shape, sample_generator(0, 0)))
         assert out.min() >= 0 and out.max() <= 255.5 / 255            # floor8 reads 255 as 255.5
         assert (out[images >= 1.01] >= 254 / 255).all()       # over full scale: saturated
         if storage == "round8":
             torch.testing.assert_close(out * 255, (out * 255).round())
-    dim = record(images, Camera(exposure=(-2.0, -2.0), read_noise=0.0, shot_noise=0.0,
-                                formats={"round8": 1.0}), sample_generator(0, 0))
+    dim = record(images, expose(Camera(exposure=(-2.0, -2.0), read_noise=0.0, shot_noise=0.0,
+                                       formats={"round8": 1.0}), images.shape, sample_generator(0, 0)))
     brightest = round(float(images.max()) * 0.01 * 255)       # two decades down: a few levels left
     assert brightest <= 5 and float(dim.max()) == pytest.approx(brightest / 255)
 
@@ -218,6 +222,18 @@ SCENE = dict(resolution=64, images=6, shapes=dict.fromkeys(SHAPES, 1.0), layouts
              camera=Camera(), paint=0.5, seed=11)
 
 
+def test_samples_drawn_in_a_worker_and_rendered_after_are_the_samples():
+    """The GPU route of the training data (draws in the workers, rendering in the training process),
+    taken on the CPU: bit for bit the samples the CPU route gives."""
+    dataset = LightDataset(4, **SCENE)
+    draws = DataLoader(Draws(dataset), batch_size=4, num_workers=1, collate_fn=list)
+    scenes = next(iter(draws))
+    assert all(isinstance(scene, Scene) for scene in scenes)
+    rendered = default_collate([render(scene, torch.device("cpu")) for scene in scenes])
+    plain = next(iter(DataLoader(dataset, batch_size=4)))
+    assert all(torch.equal(rendered[key], plain[key]) for key in plain)
+
+
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")
 def test_a_sample_rendered_on_a_gpu_is_the_cpu_sample_to_float_rounding():
     on_cpu, on_gpu = LightDataset(6, **SCENE), LightDataset(6, **SCENE, device=torch.device("cuda"))
@@ -227,3 +243,8 @@ def test_a_sample_rendered_on_a_gpu_is_the_cpu_sample_to_float_rounding():
         assert torch.equal(a["directions"], b["directions"].cpu())
         # a pixel within rounding of a shadow's edge or an 8-bit level may flip: compare the stacks
         assert (a["images"] - b["images"].cpu()).abs().mean() < 1e-3
+    data = LightData(OmegaConf.create({"resolution": 64, "images": 6, "batch_size": 3, "max_steps": 1,
+                                       "val_samples": 3, "workers": 0}), None, 11, device=torch.device("cuda"))
+    batch = data.transfer_batch_to_device(next(iter(DataLoader(Draws(on_cpu), batch_size=3, collate_fn=list))),
+                                          torch.device("cuda"), 0)
+    assert batch["images"].device.type == "cuda" and batch["images"].shape == (3, 6, 3, 64, 64)

@@ -12,7 +12,9 @@ Rows, each a fresh process (``python -m unps.fit`` / ``python -m unps.train``) i
   seconds of the whole command, and its stages (light network, self-calibration, fit);
 - ``train``: ``python -m unps.train recipe=paper`` for ``--train-steps`` steps, the training data
   rendered on the device: samples per second over the run (a small validation included) and peak
-  GPU memory; and the rendering alone, one sample at a time in this process on the device.
+  GPU memory; and the training data's two halves alone: its random draws (CPU, one process; the
+  ``recipe.workers`` processes share them out) and their rendering on the device, one sample at a
+  time.
 
 Subjects are ``subject=`` names (DiLiGenT objects read from ``--diligent``). A rerun skips rows whose
 metrics.json exists.
@@ -70,28 +72,33 @@ def subject_overrides(name: str, diligent: Path) -> list[str]:
     return [f"subject={name}", f"paths.diligent_dir={diligent}"]
 
 
-def rendering_rate(device: str, samples: int) -> float:
-    """Samples per second of rendering ``recipe=paper`` stacks one at a time in this process on
-    ``device`` (the first, which starts CUDA, not timed)."""
+def data_rates(device: str, samples: int) -> tuple[float, float]:
+    """Samples per second of the two halves of ``recipe=paper``'s training data on this machine:
+    drawing (the CPU part, in one process; the workers share it out) and rendering the draws on
+    ``device`` one sample at a time (the first, which starts CUDA, not timed)."""
     from hydra import compose, initialize_config_module
 
     from unps.device import resolve_device
     from unps.lightnet.data import LightData
+    from unps.lightnet.synthesis import render
 
     with initialize_config_module("unps.conf", version_base="1.3"):
         cfg = compose("train", overrides=["recipe=paper"])
     where = resolve_device(device)
     data = LightData(cfg.recipe, cfg.data, cfg.seed, device=where)
     data.setup("fit")
-    data.train_set[0]
+    start = time.perf_counter()
+    scenes = [data.train_set.draw(index) for index in range(samples + 1)]
+    drawing = (samples + 1) / (time.perf_counter() - start)
+    render(scenes.pop(), where)
     if where.type == "cuda":
         torch.cuda.synchronize(where)
     start = time.perf_counter()
-    for index in range(1, samples + 1):
-        data.train_set[index]
+    for scene in scenes:
+        render(scene, where)
     if where.type == "cuda":
         torch.cuda.synchronize(where)
-    return samples / (time.perf_counter() - start)
+    return drawing, samples / (time.perf_counter() - start)
 
 
 def main() -> None:
@@ -134,9 +141,9 @@ def main() -> None:
     rate = metrics["steps"] * 32 / metrics["train_seconds"]
     print(f"| training, recipe=paper, {steps} steps of 32 | {metrics['train_seconds']:.1f} | – | "
           f"{memory(metrics)} | {rate:.1f} samples/s (a validation of 64 included) |", flush=True)
-    rendered = rendering_rate(args.device, args.render_samples)
-    print(f"| rendering the training data alone, one sample at a time | – | – | – | "
-          f"{rendered:.1f} samples/s |", flush=True)
+    drawing, rendering = data_rates(args.device, args.render_samples)
+    print(f"| training data alone: draws in one CPU process, rendering on {args.device} | – | – | – | "
+          f"{drawing:.1f} and {rendering:.1f} samples/s |", flush=True)
 
 
 if __name__ == "__main__":

@@ -6,12 +6,12 @@ import logging
 
 import lightning as L
 import torch
-from torch.utils.data import DataLoader
+from torch.utils.data import DataLoader, Dataset, default_collate
 
 from unps.lightnet.materials import MaterialBank
 from unps.lightnet.rig import Camera
 from unps.lightnet.meshes import mesh_views
-from unps.lightnet.synthesis import LightDataset
+from unps.lightnet.synthesis import LightDataset, Scene, render
 
 VALIDATION_SEED_OFFSET = 1_000_003   # validation stacks never share a (seed, index) with training
 
@@ -31,9 +31,10 @@ class LightData(L.LightningDataModule):
         seed: the run's seed.
         start_step: the step training resumes from; its first ``start_step · batch_size`` items
             were seen before.
-        device: where the stacks are rendered. On a GPU they are rendered there, in the training
-            process (``recipe.workers`` is then not used: CUDA does not run in forked workers);
-            on the CPU, in ``recipe.workers`` worker processes.
+        device: where the stacks are rendered. On the CPU, whole samples come from
+            ``recipe.workers`` worker processes; on a GPU the workers make only each sample's
+            random draws (:meth:`LightDataset.draw`) and the training process renders the batch
+            on the GPU as it arrives (:meth:`transfer_batch_to_device`).
     """
 
     def __init__(self, recipe, data, seed: int, start_step: int = 0,
@@ -65,14 +66,24 @@ class LightData(L.LightningDataModule):
                                     **common)
 
     def _loader(self, dataset: LightDataset) -> DataLoader:
-        workers = self.recipe.workers if self.device.type == "cpu" else 0
-        return DataLoader(dataset, batch_size=self.recipe.batch_size, num_workers=workers,
-                          persistent_workers=workers > 0)
+        workers = self.recipe.workers
+        if self.device.type == "cpu":
+            return DataLoader(dataset, batch_size=self.recipe.batch_size, num_workers=workers,
+                              persistent_workers=workers > 0)
+        return DataLoader(Draws(dataset), batch_size=self.recipe.batch_size, num_workers=workers,
+                          persistent_workers=workers > 0, collate_fn=list)
+
+    def transfer_batch_to_device(self, batch, device: torch.device, dataloader_idx: int):
+        """A batch of draws (device path) rendered on ``device``; a rendered batch moved there."""
+        if self.device.type == "cpu":
+            return super().transfer_batch_to_device(batch, device, dataloader_idx)
+        return default_collate([render(scene, device) for scene in batch])
 
     def workers_note(self) -> str:
         """Where the stacks are rendered, for the log."""
         if self.device.type != "cpu":
-            return f"training data rendered on {self.device} in this process"
+            return (f"training data drawn in {self.recipe.workers} worker process(es) and rendered "
+                    f"on {self.device}")
         return f"training data rendered in {self.recipe.workers} worker process(es)"
 
     def train_dataloader(self) -> DataLoader:
@@ -80,6 +91,20 @@ class LightData(L.LightningDataModule):
 
     def val_dataloader(self) -> DataLoader:
         return self._loader(self.val_set)
+
+
+class Draws(Dataset):
+    """A :class:`LightDataset`'s samples as their draws (:class:`~unps.lightnet.synthesis.Scene`),
+    not yet rendered."""
+
+    def __init__(self, samples: LightDataset):
+        self.samples = samples
+
+    def __len__(self) -> int:
+        return len(self.samples)
+
+    def __getitem__(self, index: int) -> Scene:
+        return self.samples.draw(index)
 
 
 def camera(settings) -> Camera | None:

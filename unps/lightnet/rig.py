@@ -110,24 +110,50 @@ def quantize(values: torch.Tensor, storage: str) -> torch.Tensor:
     raise ValueError(f"storage must be one of {FORMATS}, got {storage!r}")
 
 
-def record(images: torch.Tensor, camera: Camera, generator: torch.Generator) -> torch.Tensor:
+@dataclass(frozen=True)
+class Exposure:
+    """The camera's random draws for one stack, made before it is recorded (so on the CPU, whatever
+    device records it).
+
+    Attributes:
+        gain: the factor that brings the stack's 99th percentile to its level.
+        shot, read: this stack's photon-noise factor and read-noise σ.
+        noise: (n, 3, H, W) standard normal draws.
+        storage: one of :data:`FORMATS`.
+    """
+
+    gain: float
+    shot: float
+    read: float
+    noise: torch.Tensor
+    storage: str
+
+
+def expose(camera: Camera, shape: tuple[int, ...], generator: torch.Generator) -> Exposure:
+    """Draw the camera's settings and noise for a stack of ``shape`` (n, 3, H, W)."""
+    u = lambda *size: torch.rand(*size, generator=generator)    # noqa: E731
+    low, high = camera.exposure
+    gain = 10 ** (low + (high - low) * float(u(1)))
+    shot, read = camera.shot_noise * float(u(1)), camera.read_noise * float(u(1))
+    noise = torch.randn(shape, generator=generator)
+    names = [name for name in FORMATS if camera.formats.get(name, 0) > 0]
+    p = torch.tensor([camera.formats[name] for name in names], dtype=torch.float64)
+    storage = names[int(torch.multinomial(p / p.sum(), 1, generator=generator))]
+    return Exposure(gain, shot, read, noise, storage)
+
+
+def record(images: torch.Tensor, exposure: Exposure) -> torch.Tensor:
     """A stack scaled to a 99th percentile of 1, as the camera stores it.
 
     Args:
         images: (n, 3, H, W) radiance, 99th percentile of the object's values 1, on any device.
-        generator: a CPU generator; every draw is made on the CPU (the same numbers on any
-            device) and the noise moved to the images' device.
+        exposure: the camera's draws for this stack (:func:`expose`); its noise is moved to the
+            images' device.
 
     Returns:
         (n, 3, H, W) in [0, 1]: exposed, noisy, clipped at full scale and quantised.
     """
-    u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
-    low, high = camera.exposure
-    values = images * 10 ** (low + (high - low) * float(u(1)))
-    sigma = torch.sqrt(camera.shot_noise * float(u(1)) * values.clamp_min(0)
-                       + (camera.read_noise * float(u(1))) ** 2)
-    noise = torch.randn(values.shape, generator=generator).to(values.device)
-    values = (values + sigma * noise).clamp(0, 1)
-    names = [name for name in FORMATS if camera.formats.get(name, 0) > 0]
-    p = torch.tensor([camera.formats[name] for name in names], dtype=torch.float64)
-    return quantize(values, names[int(torch.multinomial(p / p.sum(), 1, generator=generator))])
+    values = images * exposure.gain
+    sigma = torch.sqrt(exposure.shot * values.clamp_min(0) + exposure.read ** 2)
+    values = (values + sigma * exposure.noise.to(values.device)).clamp(0, 1)
+    return quantize(values, exposure.storage)

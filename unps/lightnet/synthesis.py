@@ -13,13 +13,15 @@ pixel is 2 / resolution units and depth is in the same units.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import torch
 import torch.nn.functional as F
 from torch.utils.data import Dataset
 
 from unps.errors import InputError
 from unps.lightnet.materials import FAMILIES, MaterialBank, painted, shade
-from unps.lightnet.rig import LAYOUTS, Camera, draw_lights, record
+from unps.lightnet.rig import LAYOUTS, Camera, Exposure, draw_lights, expose, record
 from unps.lightnet.shapes import SHAPES, ShapeMaps, check_weights, draw_shape, sample_generator
 
 
@@ -89,6 +91,11 @@ class LightDataset(Dataset):
         return self.length
 
     def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+        """Sample ``index``, rendered on the dataset's device."""
+        return render(self.draw(index), self.device)
+
+    def draw(self, index: int) -> Scene:
+        """Every random draw of sample ``index``, made on the CPU from its own generator."""
         if not 0 <= index < self.length:     # also ends ``for sample in dataset``
             raise IndexError(f"sample {index} of a dataset of {self.length}")
         g = sample_generator(self.seed, self.offset + index)
@@ -99,14 +106,11 @@ class LightDataset(Dataset):
                 raise InputError(f"mesh views are {maps.depth.shape[0]} px, data {self.resolution} px")
         else:
             maps = draw_shape(self.shapes, self.resolution, g, self.shape)
-        maps = maps.to(self.device)
         family, brdf = self.materials.draw(g, self.family)
-        brdf = brdf.to(self.device)
         lights = draw_lights(self.layouts, self.lights_per_shape, self.max_zenith_deg, g)
         pick = torch.randperm(self.lights_per_shape, generator=g)[: self.images]
-        lights = lights[pick].to(self.device)
         lo, hi = self.intensity_range
-        intensities = (lo + (hi - lo) * u(self.images)).to(self.device)
+        intensities = lo + (hi - lo) * u(self.images)
         albedo = None
         if self.texture > 0:
             coarse = torch.rand(1, 1, 6, 6, generator=g) - 0.5
@@ -115,18 +119,59 @@ class LightDataset(Dataset):
         if self.paint > 0 and float(u(1)) < self.paint:
             paint = painted(self.resolution, g)
             albedo = paint if albedo is None else albedo[..., None] * paint
-        images = shade(maps, brdf, lights, intensities, None if albedo is None else albedo.to(self.device))
-        values = images[:, :, maps.mask].flatten()
-        level = torch.quantile(values[:: max(1, len(values) // 8192)], 0.99).clamp_min(1e-8)
-        images = images / level
+        shape = (self.images, 3, self.resolution, self.resolution)
         if self.camera is not None:
-            images = record(images, self.camera, g)
-        else:
-            if self.saturation is not None:
-                images = images.clamp(max=self.saturation)
-            uniform = torch.rand(images.shape, generator=g).to(self.device)
-            images = images + self.perturbation * (2 * uniform - 1)
-        images = images * maps.mask
-        return {"images": images.float(), "mask": maps.mask[None].float(),
-                "directions": lights.float(), "intensities": intensities.float(),
-                "family": FAMILIES.index(family)}
+            return Scene(maps, brdf, family, lights[pick], intensities, albedo,
+                         exposure=expose(self.camera, shape, g))
+        return Scene(maps, brdf, family, lights[pick], intensities, albedo, saturation=self.saturation,
+                     perturbation=self.perturbation * (2 * torch.rand(shape, generator=g) - 1))
+
+
+@dataclass(frozen=True)
+class Scene:
+    """One sample before it is rendered: every random draw it needs, on the CPU.
+
+    Attributes:
+        maps: the shape; brdf: its material (of ``family``); lights: (n, 3) unit directions;
+        intensities: (n,); albedo: (H, W) or (H, W, 3) multiplier, or None.
+        exposure: the simulated camera's draws, or None for the paper's perturbation:
+        saturation: the level the stack is clipped at (None: none), and
+        perturbation: (n, 3, H, W) the noise added after.
+    """
+
+    maps: ShapeMaps
+    brdf: torch.nn.Module
+    family: str
+    lights: torch.Tensor
+    intensities: torch.Tensor
+    albedo: torch.Tensor | None
+    exposure: Exposure | None = None
+    saturation: float | None = None
+    perturbation: torch.Tensor | None = None
+
+
+def render(scene: Scene, device: torch.device) -> dict[str, torch.Tensor]:
+    """A sample of :class:`LightDataset` from its draws, computed on ``device``: shading, cast
+    shadows, scaling to a 99th percentile of 1, then the camera (or the perturbation).
+
+    Returns:
+        ``images`` (n, 3, H, W), ``mask`` (1, H, W), ``directions`` (n, 3), ``intensities`` (n,),
+        float32 on ``device``; ``family``, the index of the material family.
+    """
+    maps = scene.maps.to(device)
+    lights, intensities = scene.lights.to(device), scene.intensities.to(device)
+    albedo = None if scene.albedo is None else scene.albedo.to(device)
+    images = shade(maps, scene.brdf.to(device), lights, intensities, albedo)
+    values = images[:, :, maps.mask].flatten()
+    level = torch.quantile(values[:: max(1, len(values) // 8192)], 0.99).clamp_min(1e-8)
+    images = images / level
+    if scene.exposure is not None:
+        images = record(images, scene.exposure)
+    else:
+        if scene.saturation is not None:
+            images = images.clamp(max=scene.saturation)
+        images = images + scene.perturbation.to(device)
+    images = images * maps.mask
+    return {"images": images.float(), "mask": maps.mask[None].float(),
+            "directions": lights.float(), "intensities": intensities.float(),
+            "family": FAMILIES.index(scene.family)}
