@@ -12,7 +12,8 @@ from hydra import compose, initialize_config_module
 from unps.data.analytic import render_lambertian
 from unps.errors import Diverged, InputError
 from unps.fit import fit
-from unps.inverse.fit import InterreflectionModel, Preset, interreflection_bend, neural_inverse_rendering
+from unps.inverse.fit import interreflection_bend, neural_inverse_rendering
+from unps.inverse.settings import InterreflectionModel, Preset
 from unps.inverse.grids import unclipped, upsample_normals, upsample_with_detail, working_factor
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet, normal_net_input, shading, specular_map

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +29,7 @@ from unps.inverse.control import fingerprint, train
 from unps.inverse.grids import on_subject_grid, unclipped, upsample_with_detail, working_factor
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet
-from unps.inverse.schedule import Schedule
+from unps.inverse.settings import InterreflectionModel, Preset
 from unps.inverse.system import InverseRendering
 from unps.metrics import angular_error
 from unps.solvers.nayar import reflectance_scale
@@ -40,76 +39,6 @@ from unps.timing import stage
 log = logging.getLogger(__name__)
 
 CROP_MARGIN = 4   # pixels of background kept around the object so convolutions see its edge
-
-
-@dataclass(frozen=True)
-class Preset:
-    """Network sizes, working resolution and schedule (``preset=fast|paper``).
-
-    Attributes:
-        name: label.
-        width, depth, first_kernel: the normal network (:class:`NormalNet`).
-        reflectance_width, reflectance_depth, reflectance_branch: f_sp (:class:`ReflectanceNet`).
-        batch_norm: batch normalisation in both networks (Taniai & Maehara's code).
-        max_pixels: object pixels on the working grid; larger subjects are block-averaged by the
-            smallest whole factor that fits, and the normals upsampled back. None = full resolution.
-        cast_shadows: beyond the paper, render the shadows that the fitted surface casts, from its
-            depth at each update (:func:`unps.inverse.system.visibility`).
-        schedule: the optimisation's :class:`Schedule`.
-    """
-
-    name: str = "paper"
-    width: int = 384
-    depth: int = 4
-    first_kernel: int = 3
-    reflectance_width: int = 16
-    reflectance_depth: int = 3
-    reflectance_branch: int = 3
-    max_pixels: int | None = None
-    cast_shadows: bool = True
-    batch_norm: bool = True
-    schedule: Schedule = Schedule()
-
-    def __post_init__(self):
-        if isinstance(self.reflectance_branch, bool) or not isinstance(self.reflectance_branch, int) \
-                or self.reflectance_branch < 1:
-            raise InputError(f"preset.reflectance_branch must be a whole number >= 1, got "
-                             f"{self.reflectance_branch!r}")
-        for name in ("batch_norm", "cast_shadows"):
-            if not isinstance(getattr(self, name), bool):
-                raise InputError(f"preset.{name} must be true or false, got {getattr(self, name)!r}")
-
-    @classmethod
-    def from_config(cls, **fields) -> Preset:
-        """From the flat ``preset`` config node: :class:`Schedule`'s keys go to ``schedule``."""
-        timing = {f.name for f in dataclasses.fields(Schedule)}
-        return cls(**{k: v for k, v in fields.items() if k not in timing},
-                   schedule=Schedule(**{k: v for k, v in fields.items() if k in timing}))
-
-    def fields(self) -> dict:
-        """The flat fields again, as the config node has them."""
-        flat = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "schedule"}
-        return {**flat, **dataclasses.asdict(self.schedule)}
-
-
-@dataclass(frozen=True)
-class InterreflectionModel:
-    """How ``method=unps`` renders interreflections (``interreflection=nayar|…|off``).
-
-    Attributes:
-        name: label.
-        enabled: render with Nayar's pseudo-normals N_ny (else with N_o).
-        downsample: facet grid factor of the kernel.
-        occlusion: visibility between facets in the kernel.
-        albedo: the object's median diffuse reflectance, to scale P; None takes the robust
-            initialisation's albedo as a reflectance.
-    """
-
-    name: str = "nayar"
-    enabled: bool = True
-    downsample: int = 4
-    occlusion: bool = True
-    albedo: float | None = None
 
 
 def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, preset: Preset,

@@ -1,0 +1,80 @@
+"""The settings of ``method=unps``: network sizes and schedule (``preset=fast|paper``) and the
+interreflection model (``interreflection=nayar|…|off``), as the config groups give them."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+from unps.errors import InputError
+from unps.inverse.schedule import Schedule
+
+
+@dataclass(frozen=True)
+class Preset:
+    """Network sizes, working resolution and schedule (``preset=fast|paper``).
+
+    Attributes:
+        name: label.
+        width, depth, first_kernel: the normal network (:class:`NormalNet`).
+        reflectance_width, reflectance_depth, reflectance_branch: f_sp (:class:`ReflectanceNet`).
+        batch_norm: batch normalisation in both networks (Taniai & Maehara's code).
+        max_pixels: object pixels on the working grid; larger subjects are block-averaged by the
+            smallest whole factor that fits, and the normals upsampled back. None = full resolution.
+        cast_shadows: beyond the paper, render the shadows that the fitted surface casts, from its
+            depth at each update (:func:`unps.inverse.system.visibility`).
+        schedule: the optimisation's :class:`Schedule`.
+    """
+
+    name: str = "paper"
+    width: int = 384
+    depth: int = 4
+    first_kernel: int = 3
+    reflectance_width: int = 16
+    reflectance_depth: int = 3
+    reflectance_branch: int = 3
+    max_pixels: int | None = None
+    cast_shadows: bool = True
+    batch_norm: bool = True
+    schedule: Schedule = Schedule()
+
+    def __post_init__(self):
+        if isinstance(self.reflectance_branch, bool) or not isinstance(self.reflectance_branch, int) \
+                or self.reflectance_branch < 1:
+            raise InputError(f"preset.reflectance_branch must be a whole number >= 1, got "
+                             f"{self.reflectance_branch!r}")
+        for name in ("batch_norm", "cast_shadows"):
+            if not isinstance(getattr(self, name), bool):
+                raise InputError(f"preset.{name} must be true or false, got {getattr(self, name)!r}")
+
+    @classmethod
+    def from_config(cls, **fields) -> Preset:
+        """From the flat ``preset`` config node: :class:`Schedule`'s keys go to ``schedule``."""
+        timing = {f.name for f in dataclasses.fields(Schedule)}
+        return cls(**{k: v for k, v in fields.items() if k not in timing},
+                   schedule=Schedule(**{k: v for k, v in fields.items() if k in timing}))
+
+    def fields(self) -> dict:
+        """The flat fields again, as the config node has them."""
+        flat = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "schedule"}
+        return {**flat, **dataclasses.asdict(self.schedule)}
+
+
+@dataclass(frozen=True)
+class InterreflectionModel:
+    """How ``method=unps`` renders interreflections (``interreflection=nayar|…|off``).
+
+    Attributes:
+        name: label.
+        enabled: render with Nayar's pseudo-normals N_ny (else with N_o).
+        downsample: facet grid factor of the kernel.
+        occlusion: visibility between facets in the kernel.
+        albedo: the object's median diffuse reflectance, to scale P; None takes the robust
+            initialisation's albedo as a reflectance.
+    """
+
+    name: str = "nayar"
+    enabled: bool = True
+    downsample: int = 4
+    occlusion: bool = True
+    albedo: float | None = None
