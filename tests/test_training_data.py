@@ -247,4 +247,5 @@ def test_a_sample_rendered_on_a_gpu_is_the_cpu_sample_to_float_rounding():
                                        "val_samples": 3, "workers": 0}), None, 11, device=torch.device("cuda"))
     batch = data.transfer_batch_to_device(next(iter(DataLoader(Draws(on_cpu), batch_size=3, collate_fn=list))),
                                           torch.device("cuda"), 0)
-    assert batch["images"].device.type == "cuda" and batch["images"].shape == (3, 6, 3, 64, 64)
+    assert batch["images"].shape == (3, 6, 3, 64, 64)
+    assert all(batch[key].device.type == "cuda" for key in batch)

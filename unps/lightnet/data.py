@@ -77,7 +77,8 @@ class LightData(L.LightningDataModule):
         """A batch of draws (device path) rendered on ``device``; a rendered batch moved there."""
         if self.device.type == "cpu":
             return super().transfer_batch_to_device(batch, device, dataloader_idx)
-        return default_collate([render(scene, device) for scene in batch])
+        rendered = default_collate([render(scene, device) for scene in batch])
+        return super().transfer_batch_to_device(rendered, device, dataloader_idx)   # ``family`` too
 
     def workers_note(self) -> str:
         """Where the stacks are rendered, for the log."""
