@@ -110,7 +110,7 @@ def main() -> None:
     parser.add_argument("--default-subject", default="cat", help="the subject of the default command")
     parser.add_argument("--steps", type=int, default=1000, help="steps of the paper-preset fits")
     parser.add_argument("--train-steps", type=int, default=100)
-    parser.add_argument("--render-samples", type=int, default=200)
+    parser.add_argument("--render-samples", type=int, default=64)
     parser.add_argument("--diligent", type=Path, default=DILIGENT)
     args = parser.parse_args()
     device = [f"device={args.device}"]
