@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 from scipy.ndimage import map_coordinates
 import torch
+import torch.nn.functional as F
 
 from unps.data.estimate import Estimate
 from unps.data.subject import Subject
@@ -93,10 +94,10 @@ def interreflection_kernel(depth: np.ndarray, normals: np.ndarray, mask: np.ndar
 
 
 def visibility_on_device(depth: torch.Tensor, mask: torch.Tensor, steps: int = 16,
-                         chunk: int = 1024) -> torch.Tensor:
+                         chunk: int = 256) -> torch.Tensor:
     """:func:`visibility` in torch, on the device of ``depth`` (the path for a GPU).
 
-    The same segments, samples and bilinear reading (coordinates clamped to the grid, as
+    The same segments and samples, read bilinearly by ``grid_sample`` (border padding, as
     ``map_coordinates`` with ``mode="nearest"``) in float64; it agrees with :func:`visibility`
     except where a sample lies within float rounding of the 0.05-pixel threshold.
 
@@ -108,23 +109,20 @@ def visibility_on_device(depth: torch.Tensor, mask: torch.Tensor, steps: int = 1
         (m, m) bool, on ``depth``'s device.
     """
     h, w = mask.shape
-    rows, cols = torch.nonzero(mask, as_tuple=True)
-    rows, cols = rows.to(depth.dtype), cols.to(depth.dtype)
+    rows, cols = (index.to(depth.dtype) for index in torch.nonzero(mask, as_tuple=True))
     z = depth[mask]
-    surface = torch.where(mask, depth, torch.full_like(depth, -1e9)).flatten()
+    surface = torch.where(mask, depth, torch.full_like(depth, -1e9))[None, None]
     t = torch.linspace(0, 1, steps + 2, dtype=depth.dtype, device=depth.device)[1:-1, None, None]
     visible = torch.empty(len(z), len(z), dtype=torch.bool, device=depth.device)
     for start in range(0, len(z), chunk):
         i = slice(start, start + chunk)
-        r = (rows[i, None] + t * (rows[None, :] - rows[i, None])).clamp(0, h - 1)
-        c = (cols[i, None] + t * (cols[None, :] - cols[i, None])).clamp(0, w - 1)
+        r = rows[i, None] + t * (rows[None, :] - rows[i, None])                  # (steps, chunk, m)
+        c = cols[i, None] + t * (cols[None, :] - cols[i, None])
         height = z[i, None] + t * (z[None, :] - z[i, None])
-        r0, c0 = r.floor().clamp(max=h - 2 if h > 1 else 0), c.floor().clamp(max=w - 2 if w > 1 else 0)
-        fr, fc = r - r0, c - c0
-        r0, c0 = r0.long(), c0.long()
-        r1, c1 = (r0 + 1).clamp(max=h - 1), (c0 + 1).clamp(max=w - 1)
-        sampled = ((1 - fr) * ((1 - fc) * surface[r0 * w + c0] + fc * surface[r0 * w + c1])
-                   + fr * ((1 - fc) * surface[r1 * w + c0] + fc * surface[r1 * w + c1]))
+        # grid_sample's coordinates with align_corners: −1 and 1 are the first and last pixel
+        grid = torch.stack([2 * c / max(w - 1, 1) - 1, 2 * r / max(h - 1, 1) - 1], -1)
+        sampled = F.grid_sample(surface, grid.flatten(0, 1)[None], mode="bilinear",
+                                padding_mode="border", align_corners=True).view(r.shape)
         visible[i] = ~(sampled > height + 0.05).any(0)
     return visible
 
