@@ -288,6 +288,18 @@ def test_nir_benchmark_reads_one_row_per_seed_and_averages(tmp_path):
         benchmark.unps_rows(tmp_path, "ball-gt-unps-fast", ["subject=ball", "preset.input_noise_var=0.3"], [0])
 
 
+def test_light_benchmark_normals_reads_finished_rows_and_refuses_mixed_settings(tmp_path):
+    normals = load_script("lb_normals", "experiments/light_benchmark/normals.py")
+    obj = normals.scenes.OBJECTS[0]
+    (tmp_path / f"{obj.name}-rpca").mkdir()
+    (tmp_path / f"{obj.name}-rpca" / "metrics.json").write_text(json.dumps({"normal_mae": 4.5}))
+    assert normals.run_row(tmp_path / "nowhere", obj, "rpca", [], tmp_path)["normal_mae"] == 4.5
+    normals.check_settings(tmp_path, ["preset.prior_weight=0"])
+    normals.check_settings(tmp_path, ["preset.prior_weight=0"])
+    with pytest.raises(SystemExit, match=r"fitted with \['preset.prior_weight=0'\], not \[\]"):
+        normals.check_settings(tmp_path, [])
+
+
 def test_slant_script_remeasures_runs_and_their_seed_ensemble(tmp_path, capsys, monkeypatch):
     """Two seeds of a fit, one 2° steeper and one 2° flatter than the truth: each reads ±2°, and
     their ensemble is the truth."""

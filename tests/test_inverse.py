@@ -12,7 +12,7 @@ from hydra import compose, initialize_config_module
 from unps.data.analytic import render_lambertian
 from unps.errors import Diverged, InputError
 from unps.fit import fit
-from unps.inverse.fit import interreflection_bend, neural_inverse_rendering
+from unps.inverse.fit import build_system, interreflection_bend, neural_inverse_rendering
 from unps.inverse.settings import InterreflectionModel, Preset
 from unps.inverse.grids import unclipped, upsample_normals, upsample_with_detail, working_factor
 from unps.inverse.interreflection import Interreflection
@@ -86,7 +86,8 @@ def test_batch_norm_reads_out_with_the_statistics_it_was_fitted_with():
     ("reflectance_branch", 0, "preset.reflectance_branch must be a whole number >= 1, got 0"),
     ("reflectance_branch", 2.5, "preset.reflectance_branch must be a whole number >= 1, got 2.5"),
     ("batch_norm", "yes", "preset.batch_norm must be true or false, got 'yes'"),
-    ("cast_shadows", 1, "preset.cast_shadows must be true or false, got 1")])
+    ("cast_shadows", 1, "preset.cast_shadows must be true or false, got 1"),
+    ("init", "woodham", "preset.init must be one of robust, least_squares, got 'woodham'")])
 def test_a_preset_names_a_bad_network_setting(field, value, message):
     with pytest.raises(InputError, match=re.escape(message)):
         Preset.from_config(**{field: value})
@@ -196,6 +197,20 @@ def test_a_fit_on_a_coarser_working_grid_returns_full_resolution_normals(sphere)
     np.testing.assert_allclose(np.linalg.norm(estimate.normals[sphere.mask], axis=-1), 1, atol=1e-5)
     assert not estimate.normals[~sphere.mask].any()
     assert angular_error(estimate.normals, sphere.normals)[sphere.mask].mean() < 30
+
+
+@pytest.mark.parametrize("init", ["robust", "least_squares"])
+def test_the_fit_starts_from_the_initialisation_the_preset_names(sphere, init):
+    from unps.solvers.rpca import robust_init
+    from unps.solvers.woodham import woodham
+
+    start = {"robust": robust_init, "least_squares": woodham}[init](sphere, sphere.light_directions)
+    other = {"robust": woodham, "least_squares": robust_init}[init](sphere, sphere.light_directions)
+    system, _ = build_system(sphere, sphere.light_directions, Preset.from_config(**TINY, init=init),
+                             InterreflectionModel(enabled=False), False, "test")
+    init_normals = system.init_normals[0].permute(1, 2, 0).numpy()[sphere.mask]
+    np.testing.assert_allclose(init_normals, start.normals[sphere.mask], atol=1e-6)
+    assert angular_error(init_normals, other.normals[sphere.mask]).mean() > 0.5   # measured: 1.9°
 
 
 def sphere_system(prior_weight):

@@ -153,6 +153,8 @@ CASES = [
          "preset.reflectance_branch"),
     Case("batch norm not a switch", "`preset.batch_norm=maybe` with `method=unps`",
          lambda root: ["subject=lambertian", "light=gt", "preset.batch_norm=maybe"], 2, "preset.batch_norm"),
+    Case("unknown initialisation", "`preset.init=woodham` with `method=unps`",
+         lambda root: ["subject=lambertian", "light=gt", "preset.init=woodham"], 2, "preset.init"),
     Case("unknown option of a group", "`preset=nonexistent`",
          lambda root: ["subject=lambertian", "light=gt", "preset=nonexistent", *WOODHAM], 2,
          "preset/nonexistent"),

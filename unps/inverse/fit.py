@@ -5,9 +5,10 @@
     python -m unps.fit method=unps interreflection=off light=refine
 
 The subject is cropped to its mask (and, when the preset caps the pixel count, block-averaged
-to a working grid); the robust initialisation gives N_init and the albedo P; the networks are
-fitted for ``steps`` Adam steps (:class:`unps.inverse.system.InverseRendering`); the normals come
-back on the subject's own grid (from a working grid with the initialisation's finer detail added:
+to a working grid); the initialisation (``preset.init``: robust by default) gives N_init and the
+albedo P; the networks are fitted for ``steps`` Adam steps
+(:class:`unps.inverse.system.InverseRendering`); the normals come back on the subject's own grid
+(from a working grid with the initialisation's finer detail added:
 :func:`unps.inverse.grids.upsample_with_detail`). With an output folder, checkpoints land in
 ``checkpoints/`` every ``update_every`` steps and a rerun in the same folder resumes.
 """
@@ -34,6 +35,7 @@ from unps.inverse.system import InverseRendering
 from unps.metrics import angular_error
 from unps.solvers.nayar import reflectance_scale
 from unps.solvers.rpca import robust_init
+from unps.solvers.woodham import woodham
 from unps.timing import stage
 
 log = logging.getLogger(__name__)
@@ -94,7 +96,7 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
         bend = interreflection_bend(normals, pseudo_normals, work.mask) if solver else None
         if factor > 1:
             coarse_init = system.init_normals[0].permute(1, 2, 0).cpu().numpy()
-            fine_init = robust_init(cropped, light_directions, device=device).normals
+            fine_init = initial_estimate(cropped, light_directions, preset.init, device).normals
             normals = upsample_with_detail(normals, coarse_init, fine_init,
                                            work.mask, factor)
         directions, scales = rendering["light_directions"], rendering["light_scales"]
@@ -117,15 +119,15 @@ def build_system(work: Subject, light_directions: np.ndarray, preset: Preset,
                  interreflection: InterreflectionModel,
                  refine_lights: bool, run_fingerprint: str, usable: np.ndarray | None = None,
                  device: torch.device = torch.device("cpu")) -> tuple[InverseRendering, float]:
-    """The robust initialisation, the networks and the interreflection solve for the working grid,
+    """The initialisation, the networks and the interreflection solve for the working grid,
     around one :class:`InverseRendering`; also the white level the images were divided by.
     ``usable``: (n, h, w) 1 for values the loss may use (:func:`unclipped`), None for all;
-    ``device``: where the robust initialisation runs.
+    ``device``: where the initialisation runs.
 
     Raises:
         InputError: the images are black on the object.
     """
-    init = robust_init(work, light_directions, device=device)
+    init = initial_estimate(work, light_directions, preset.init, device)
     mask = work.mask
     scale = float(np.percentile(work.images[:, mask], 99))    # the white level: images in [0, ~1]
     if not scale > 0:
@@ -156,6 +158,15 @@ def build_system(work: Subject, light_directions: np.ndarray, preset: Preset,
         usable=None if usable is None else torch.as_tensor(usable)[:, None],
         shadows=preset.cast_shadows)
     return system, scale
+
+
+def initial_estimate(subject: Subject, light_directions: np.ndarray, init: str,
+                     device: torch.device) -> Estimate:
+    """N_init and the albedo P (``preset.init``): the robust low-rank initialisation or
+    Woodham's least squares on every pixel."""
+    if init == "least_squares":
+        return woodham(subject, light_directions)
+    return robust_init(subject, light_directions, device=device)
 
 
 def interreflection_bend(normals: np.ndarray, pseudo_normals: np.ndarray, mask: np.ndarray) -> dict:

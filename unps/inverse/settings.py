@@ -9,6 +9,8 @@ from dataclasses import dataclass
 from unps.errors import InputError
 from unps.inverse.schedule import Schedule
 
+INITS = ("robust", "least_squares")
+
 
 @dataclass(frozen=True)
 class Preset:
@@ -19,6 +21,9 @@ class Preset:
         width, depth, first_kernel: the normal network (:class:`NormalNet`).
         reflectance_width, reflectance_depth, reflectance_branch: f_sp (:class:`ReflectanceNet`).
         batch_norm: batch normalisation in both networks (Taniai & Maehara's code).
+        init: the start N_init and albedo P: ``robust`` (the paper's low-rank initialisation,
+            :func:`unps.solvers.rpca.robust_init`) or ``least_squares`` (Woodham's, on every
+            pixel as captured: :func:`unps.solvers.woodham.woodham`).
         max_pixels: object pixels on the working grid; larger subjects are block-averaged by the
             smallest whole factor that fits, and the normals upsampled back. None = full resolution.
         cast_shadows: beyond the paper, render the shadows that the fitted surface casts, from its
@@ -36,6 +41,7 @@ class Preset:
     max_pixels: int | None = None
     cast_shadows: bool = True
     batch_norm: bool = True
+    init: str = "robust"
     schedule: Schedule = Schedule()
 
     def __post_init__(self):
@@ -43,6 +49,8 @@ class Preset:
                 or self.reflectance_branch < 1:
             raise InputError(f"preset.reflectance_branch must be a whole number >= 1, got "
                              f"{self.reflectance_branch!r}")
+        if self.init not in INITS:
+            raise InputError(f"preset.init must be one of {', '.join(INITS)}, got {self.init!r}")
         for name in ("batch_norm", "cast_shadows"):
             if not isinstance(getattr(self, name), bool):
                 raise InputError(f"preset.{name} must be true or false, got {getattr(self, name)!r}")
