@@ -2,7 +2,7 @@
 
     python experiments/light_benchmark/normals.py                       # 24 objects, 96 lights
     python experiments/light_benchmark/normals.py --set preset.prior_weight=0 --tag prior0
-    python experiments/light_benchmark/normals.py --names bowl-pits goblet --methods unps
+    python experiments/light_benchmark/normals.py --names blob03 goblet-a --methods unps
 
 The 24 objects of ``scenes.py`` (meshes and procedural shapes with cavities, thin parts and
 self-shadowing; two or three held-out MERL materials each; cast shadows and interreflections;
