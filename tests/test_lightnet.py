@@ -222,11 +222,29 @@ def test_two_step_training_writes_checkpoints_and_metrics(trained):
 def test_training_logs_a_progress_line_per_validation_with_its_figures(tmp_path, caplog):
     caplog.set_level(logging.INFO)
     metrics = train(train_config(tmp_path, "recipe.max_steps=4"))       # validations after steps 2 and 4
+    assert metrics["train_samples_per_s"] > 0     # steps 3 and 4, the validation between them left out
     lines = [r.getMessage() for r in caplog.records]
     assert any(line.startswith("training LightNet on") for line in lines)
     steps = [line for line in lines if line.startswith("step ")]
     assert [line.split(":")[0] for line in steps] == ["step 2/4", "step 4/4"]
     assert f"validation direction error {metrics['val/direction_mae']:.2f}°" in steps[-1]
+
+
+def test_the_sample_rate_leaves_out_the_first_steps_and_the_validations(monkeypatch):
+    from unps.lightnet import callbacks
+
+    clock = iter([1.0, 3.0, 4.0, 5.0, 11.0, 12.0, 20.0, 21.0])   # seconds, at each call below
+    monkeypatch.setattr(callbacks.time, "perf_counter", lambda: next(clock))
+    rate, batch = callbacks.SampleRate(skip=2), {"images": torch.zeros(4, 1)}
+    for _ in range(2):
+        rate.on_train_batch_end(None, None, None, batch, 0)          # start-up: 1 s, 3 s
+    rate.on_train_batch_end(None, None, None, batch, 0)              # 4 s: 1 s, 4 samples
+    rate.on_validation_start(None, None)                             # 5 s
+    rate.on_validation_end(None, None)                               # 11 s
+    rate.on_train_batch_end(None, None, None, batch, 0)              # 12 s: 8 s, 6 of them validation
+    rate.on_validation_start(None, None)                             # the last validation: not counted
+    rate.on_validation_end(None, None)
+    assert rate.samples_per_s == pytest.approx(8 / (1 + 2))
 
 
 def test_the_last_checkpoint_follows_every_validation_not_only_the_best(tmp_path):

@@ -111,7 +111,7 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
     from unps.inverse.callbacks import ProgressLog
     from unps.inverse.control import LIGHTNING_NOISE
     from unps.io.files import write_json
-    from unps.lightnet.callbacks import LightSamples
+    from unps.lightnet.callbacks import LightSamples, SampleRate
     from unps.lightnet.data import LightData
     from unps.lightnet.system import LightEstimation
 
@@ -142,6 +142,7 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
                              lr_milestones=tuple(cfg.recipe.lr_milestones),
                              lr_gamma=cfg.recipe.lr_gamma, soft_decode=cfg.soft_decode,
                              config=OmegaConf.to_container(cfg, resolve=True))
+    rate = SampleRate(skip=min(5, cfg.recipe.max_steps // 2))
     trainer = L.Trainer(
         max_steps=cfg.recipe.max_steps, max_time=cfg.recipe.max_time,
         val_check_interval=cfg.recipe.val_every, check_val_every_n_epoch=None,
@@ -150,7 +151,7 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
                                    save_top_k=1, filename="best"),
                    ModelCheckpoint(dirpath=out / "checkpoints", save_last=True, save_top_k=0,
                                    every_n_train_steps=cfg.recipe.val_every),
-                   LightSamples(), LearningRateMonitor(),
+                   LightSamples(), LearningRateMonitor(), rate,
                    ProgressLog(shown=PROGRESS, logger=log, after_validation=True)],
         **trainer_placement(device), log_every_n_steps=cfg.recipe.log_every,
         enable_progress_bar=False, enable_model_summary=False, deterministic=False)
@@ -171,6 +172,7 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
                  out / "checkpoints" / "last.ckpt")
     metrics = {k: float(v) for k, v in trainer.callback_metrics.items()}
     metrics.update(train_seconds=time.perf_counter() - start, steps=trainer.global_step,
+                   train_samples_per_s=rate.samples_per_s,
                    device=describe(device), gpu_peak_gb=peak_memory_gb(device))
     write_json(out / "metrics.json", metrics)
     return metrics

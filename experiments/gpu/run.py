@@ -11,12 +11,14 @@ Rows, each a fresh process (``python -m unps.fit`` / ``python -m unps.train``) i
 - ``default-<subject>``: the default uncalibrated command (``light=selfcal preset=fast``): wall
   seconds of the whole command, and its stages (light network, self-calibration, fit);
 - ``train``: ``python -m unps.train recipe=paper`` for ``--train-steps`` steps, the training data
-  rendered on the device: samples per second over the run (a small validation included) and peak
-  GPU memory; and the training data's two halves alone: its random draws (CPU, one process; the
-  ``recipe.workers`` processes share them out) and their rendering on the device, one sample at a
-  time.
+  rendered on the device: samples per second over the run (start-up and a small validation
+  included) and once running (after its first steps, validations left out), and peak GPU
+  memory; and the training data's two halves alone: its random draws (CPU, one process; the
+  ``recipe.workers`` processes share them out) and their rendering on the device, one sample at
+  a time.
 
-Subjects are ``subject=`` names (DiLiGenT objects read from ``--diligent``). A rerun skips rows whose
+Subjects are ``subject=`` names (DiLiGenT objects read from ``--diligent``, the folder holding
+``pmsData/`` or ``pmsData_crop/``). A rerun skips rows whose
 metrics.json exists.
 """
 
@@ -138,9 +140,12 @@ def main() -> None:
     steps = args.train_steps
     metrics, _ = run(args.out / "train", "unps.train", "recipe=paper", f"recipe.max_steps={steps}",
                      f"recipe.val_every={steps}", "recipe.val_samples=64", *device)
-    rate = metrics["steps"] * 32 / metrics["train_seconds"]
+    overall = metrics["steps"] * 32 / metrics["train_seconds"]
+    running = metrics.get("train_samples_per_s")
+    running = "–" if running is None else f"{running:.1f}"
     print(f"| training, recipe=paper, {steps} steps of 32 | {metrics['train_seconds']:.1f} | – | "
-          f"{memory(metrics)} | {rate:.1f} samples/s (a validation of 64 included) |", flush=True)
+          f"{memory(metrics)} | {overall:.1f} samples/s over the run (start-up and a validation of 64 "
+          f"included), {running} once running |", flush=True)
     drawing, rendering = data_rates(args.device, args.render_samples)
     print(f"| training data alone: draws in one CPU process, rendering on {args.device} | – | – | – | "
           f"{drawing:.1f} and {rendering:.1f} samples/s |", flush=True)

@@ -1,6 +1,8 @@
-"""TensorBoard pictures for the light network (rank zero only)."""
+"""Callbacks of the light network's training: TensorBoard pictures (rank zero only), the training rate."""
 
 from __future__ import annotations
+
+import time
 
 import lightning as L
 import numpy as np
@@ -62,3 +64,36 @@ class LightSamples(L.Callback):
             writer.add_image(f"samples/{i}/lights_true_green_predicted_red",
                              torch.as_tensor(sphere), trainer.global_step)
         self._batch = None
+
+
+class SampleRate(L.Callback):
+    """Training samples per second once the run is under way: counted from the end of its first
+    ``skip`` steps (data workers starting, the device warming up) to its last step, validations
+    left out. ``samples_per_s`` is None until a step past ``skip`` has run."""
+
+    def __init__(self, skip: int = 5):
+        self.skip = skip
+        self._batches = self._samples = 0
+        self._active = self._paused = 0.0
+        self._last: float | None = None
+        self._validation_start: float | None = None
+
+    def on_train_batch_end(self, trainer, module, outputs, batch, batch_idx) -> None:
+        now = time.perf_counter()
+        self._batches += 1
+        if self._batches > self.skip and self._last is not None:
+            self._active += now - self._last - self._paused
+            self._samples += len(batch["images"])
+        if self._batches >= self.skip:
+            self._last, self._paused = now, 0.0
+
+    def on_validation_start(self, trainer, module) -> None:
+        self._validation_start = time.perf_counter()
+
+    def on_validation_end(self, trainer, module) -> None:
+        if self._last is not None and self._validation_start is not None:
+            self._paused += time.perf_counter() - self._validation_start
+
+    @property
+    def samples_per_s(self) -> float | None:
+        return self._samples / self._active if self._samples and self._active > 0 else None
