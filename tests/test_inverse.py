@@ -12,12 +12,13 @@ from hydra import compose, initialize_config_module
 from unps.data.analytic import render_lambertian
 from unps.errors import Diverged, InputError
 from unps.fit import fit
-from unps.inverse.fit import build_system, interreflection_bend, neural_inverse_rendering
+from unps.inverse.fit import (FAR_FROM_START_DEG, build_system, distance_from_start, interreflection_bend,
+                              neural_inverse_rendering)
 from unps.inverse.settings import InterreflectionModel, Preset
 from unps.inverse.grids import unclipped, upsample_normals, upsample_with_detail, working_factor
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet, normal_net_input, shading, specular_map
-from unps.inverse.system import InverseRendering, visibility
+from unps.inverse.system import InverseRendering, residual_weight, visibility
 from unps.metrics import angular_error
 
 TINY = dict(name="tiny", width=16, depth=3, first_kernel=1, reflectance_width=8, steps=20,
@@ -87,10 +88,27 @@ def test_batch_norm_reads_out_with_the_statistics_it_was_fitted_with():
     ("reflectance_branch", 2.5, "preset.reflectance_branch must be a whole number >= 1, got 2.5"),
     ("batch_norm", "yes", "preset.batch_norm must be true or false, got 'yes'"),
     ("cast_shadows", 1, "preset.cast_shadows must be true or false, got 1"),
-    ("init", "woodham", "preset.init must be one of robust, least_squares, got 'woodham'")])
+    ("init", "woodham", "preset.init must be one of robust, least_squares, got 'woodham'"),
+    ("residual", "l2", "preset.residual must be one of absolute, relative, got 'l2'")])
 def test_a_preset_names_a_bad_network_setting(field, value, message):
     with pytest.raises(InputError, match=re.escape(message)):
         Preset.from_config(**{field: value})
+
+
+def test_a_relative_residual_weighs_a_dark_material_as_much_as_a_bright_one():
+    """Half the object ten times darker: its pixels weigh ten times more, the weights average 1
+    over the object, a black pixel is held at ten times the median's weight, off-object is 0."""
+    images = torch.full((4, 3, 2, 6), 0.8)
+    images[..., 3:] = 0.08
+    images[..., 0, 5] = 0.0
+    mask = torch.ones(1, 1, 2, 6)
+    mask[..., 1, 0] = 0
+    assert torch.equal(residual_weight(images, mask, "absolute"), torch.ones_like(mask))
+    weight = residual_weight(images, mask, "relative")[0, 0]
+    assert weight[0, 4] / weight[0, 0] == pytest.approx(10)
+    assert weight[0, 5] / weight[0, 0] == pytest.approx(0.8 / (0.1 * 0.08))   # floor: 0.1 × median
+    assert (weight * mask[0, 0]).sum() / mask.sum() == pytest.approx(1)
+    assert weight[1, 0] == 0
 
 
 def test_the_global_term_equals_concatenating_the_features_to_every_image():
@@ -345,6 +363,24 @@ def test_interreflection_off_and_in_memory_fits(sphere):
         info = estimate.info
         assert info["interreflection"] is enabled
         assert (info["interreflection_bend_deg"] >= 0) if enabled else info["interreflection_bend_deg"] is None
+        assert info["moved_from_start_deg"] > 0
+
+
+@pytest.mark.parametrize("tilt, warned", [(5.0, False), (30.0, True)])
+def test_a_fit_that_ends_far_from_its_start_says_so(caplog, tilt, warned):
+    mask = np.ones((4, 5), bool)
+    mask[0, 0] = False
+    start = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (4, 5, 3))
+    angle = np.radians(tilt)
+    fitted = np.broadcast_to(np.array([np.sin(angle), 0.0, np.cos(angle)]), (4, 5, 3)).copy()
+    fitted[0, 0] = [1.0, 0.0, 0.0]                       # off the mask: not counted
+    caplog.set_level("WARNING")
+    assert distance_from_start(fitted, start, mask, "least_squares") == pytest.approx(tilt)
+    said = [r.getMessage() for r in caplog.records if "from its start" in r.getMessage()]
+    assert said == ([f"the fit ended {tilt:.1f}° on average from its start, the least squares "
+                     f"initialisation (more than {FAR_FROM_START_DEG:.0f}°): where the images hardly "
+                     f"pin the normals (dark or glossy materials, wrong lights) it can drift; compare "
+                     f"with method=rpca, or try preset.residual=relative"] if warned else [])
 
 
 def test_clipped_values_are_left_out_of_the_loss():

@@ -41,6 +41,7 @@ from unps.timing import stage
 log = logging.getLogger(__name__)
 
 CROP_MARGIN = 4   # pixels of background kept around the object so convolutions see its edge
+FAR_FROM_START_DEG = 20.0   # a fit that ends this far from its start, on average, is reported
 
 
 def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, preset: Preset,
@@ -94,8 +95,9 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
         rendering = final_rendering(system, schedule.images_per_step or 16, scale)
         normals, pseudo_normals = rendering.pop("normals"), rendering.pop("pseudo_normals")
         bend = interreflection_bend(normals, pseudo_normals, work.mask) if solver else None
+        coarse_init = system.init_normals[0].permute(1, 2, 0).cpu().numpy()
+        moved = distance_from_start(normals, coarse_init, work.mask, preset.init)
         if factor > 1:
-            coarse_init = system.init_normals[0].permute(1, 2, 0).cpu().numpy()
             fine_init = initial_estimate(cropped, light_directions, preset.init, device).normals
             normals = upsample_with_detail(normals, coarse_init, fine_init,
                                            work.mask, factor)
@@ -109,7 +111,7 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
             "parameters": parameters, "facets": solver.n_facets if solver else 0, "preset": preset.name,
             "interreflection": interreflection.enabled,
             "facet_downsample": solver.factor if solver else None,
-            "interreflection_bend_deg": bend["mean"] if bend else None}
+            "interreflection_bend_deg": bend["mean"] if bend else None, "moved_from_start_deg": moved}
     rendering = Rendering(work.mask, work.images, rendering["reconstruction"], rendering["reflectance"])
     return Estimate(normals, albedo, light_directions=directions if refine_lights else None,
                     light_scales=scales if refine_lights else None, rendering=rendering, info=info)
@@ -167,6 +169,20 @@ def initial_estimate(subject: Subject, light_directions: np.ndarray, init: str,
     if init == "least_squares":
         return woodham(subject, light_directions)
     return robust_init(subject, light_directions, device=device)
+
+
+def distance_from_start(normals: np.ndarray, start: np.ndarray, mask: np.ndarray, init: str) -> float:
+    """The mean angle in degrees between the fitted normals and the fit's start N_init, (h, w, 3)
+    unit each, over the (h, w) ``mask``; a warning when it exceeds :data:`FAR_FROM_START_DEG`
+    (``init``: ``preset.init``, named in it). Where the images hardly pin the normals (dark or
+    glossy materials, wrong lights) a fit can drift far from its start while its loss still falls."""
+    moved = float(angular_error(normals, start)[mask].mean())
+    if moved > FAR_FROM_START_DEG:
+        log.warning("the fit ended %.1f° on average from its start, the %s initialisation (more than "
+                    "%.0f°): where the images hardly pin the normals (dark or glossy materials, wrong "
+                    "lights) it can drift; compare with method=rpca, or try preset.residual=relative",
+                    moved, init.replace("_", " "), FAR_FROM_START_DEG)
+    return moved
 
 
 def interreflection_bend(normals: np.ndarray, pseudo_normals: np.ndarray, mask: np.ndarray) -> dict:

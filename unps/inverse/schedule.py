@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 from unps.errors import InputError
 
+RESIDUALS = ("absolute", "relative")
+
 
 @dataclass(frozen=True)
 class Schedule:
@@ -24,6 +26,9 @@ class Schedule:
         prior_weight: weight of the prior ‖N_o − N_init‖² toward the robust initialisation.
         prior_steps: the prior holds for the first this many steps.
         update_every: depth and the interreflection kernel are rebuilt from N_o this often (100).
+        residual: how each pixel's L1 residual enters the loss: ``absolute`` (the paper's) or
+            ``relative``, divided by the pixel's mean brightness over the images (floored at a
+            tenth of the object's median), so that dark materials weigh as much as bright ones.
     """
 
     steps: int = 1000
@@ -36,8 +41,11 @@ class Schedule:
     prior_weight: float = 0.1
     prior_steps: int = 50
     update_every: int = 100
+    residual: str = "absolute"
 
     def __post_init__(self):
+        if self.residual not in RESIDUALS:
+            raise InputError(f"preset.residual must be one of {', '.join(RESIDUALS)}, got {self.residual!r}")
         whole = {"steps": 1, "update_every": 1, "lr_drop_at": 0, "prior_steps": 0}
         for name, least in whole.items():
             value = getattr(self, name)

@@ -52,6 +52,34 @@ def visibility(normals: np.ndarray, mask: np.ndarray, directions: torch.Tensor) 
     return (~hidden).float()[:, None]
 
 
+def residual_weight(images: torch.Tensor, mask: torch.Tensor, residual: str,
+                    floor: float = 0.1) -> torch.Tensor:
+    """Each pixel's weight in the L1 loss (``preset.residual``).
+
+    Args:
+        images: (n, 3, H, W) observed images.
+        mask: (1, 1, H, W) float, 1 on the object.
+        residual: ``absolute``: every pixel 1; ``relative``: 1 / the pixel's mean brightness over
+            the images and channels, that brightness floored at ``floor`` × its median over the
+            object, the weights scaled to mean 1 over the object and 0 off it.
+
+    Returns:
+        (1, 1, H, W) weights.
+
+    Example:
+        >>> images = torch.tensor([1.0, 0.5, 0.25]).view(1, 1, 1, 3).expand(2, 3, 1, 3)
+        >>> weight = residual_weight(images, torch.ones(1, 1, 1, 3), "relative")
+        >>> [round(w, 4) for w in weight.flatten().tolist()]    # 1 : 2 : 4, mean 1
+        [0.4286, 0.8571, 1.7143]
+    """
+    if residual == "absolute":
+        return torch.ones_like(mask)
+    brightness = images.mean((0, 1), keepdim=True)
+    least = floor * brightness[mask > 0].median()
+    weight = 1 / brightness.clamp_min(float(least) if least > 0 else 1e-12)
+    return weight * mask * mask.sum() / (weight * mask).sum()
+
+
 class InverseRendering(L.LightningModule):
     """Loss, optimiser and logging of one subject's fit.
 
@@ -103,6 +131,8 @@ class InverseRendering(L.LightningModule):
         self.register_buffer("true_normals", None if true_normals is None else true_normals[None],
                              persistent=False)
         self.register_buffer("visible", torch.ones(images.shape[0], 1, *mask.shape), persistent=False)
+        self.register_buffer("pixel_weight", residual_weight(images, self.mask, schedule.residual),
+                             persistent=False)
         n = images.shape[0]
         self.light_offsets = torch.nn.Parameter(torch.zeros(n, 3), requires_grad=refine_lights)
         self.light_log_scales = torch.nn.Parameter(torch.zeros(n), requires_grad=refine_lights)
@@ -195,7 +225,7 @@ class InverseRendering(L.LightningModule):
             keep = self.mask
         if self.usable is not None:
             keep = keep * self.usable[index]                     # (B, 1, H, W): clipped values out
-        residual = (out["reconstruction"] - out["observed"]).abs() * keep
+        residual = (out["reconstruction"] - out["observed"]).abs() * keep * self.pixel_weight
         loss = residual.sum() / (keep.expand(count, 1, -1, -1).sum().clamp_min(1) * 3)
         self.log("loss/reconstruction", loss, prog_bar=True)
         if self.global_step < s.prior_steps and s.prior_weight > 0:
