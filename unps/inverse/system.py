@@ -225,7 +225,7 @@ class InverseRendering(L.LightningModule):
             keep = self.mask
         if self.usable is not None:
             keep = keep * self.usable[index]                     # (B, 1, H, W): clipped values out
-        residual = (out["reconstruction"] - out["observed"]).abs() * keep * self.pixel_weight
+        residual = (out["reconstruction"] - out["observed"]).abs() * (keep * self.pixel_weight)
         loss = residual.sum() / (keep.expand(count, 1, -1, -1).sum().clamp_min(1) * 3)
         self.log("loss/reconstruction", loss, prog_bar=True)
         if self.global_step < s.prior_steps and s.prior_weight > 0:
