@@ -89,14 +89,14 @@ def test_batch_norm_reads_out_with_the_statistics_it_was_fitted_with():
     ("batch_norm", "yes", "preset.batch_norm must be true or false, got 'yes'"),
     ("cast_shadows", 1, "preset.cast_shadows must be true or false, got 1"),
     ("init", "woodham", "preset.init must be one of robust, least_squares, got 'woodham'"),
-    ("residual", "l2", "preset.residual must be one of absolute, relative, got 'l2'")])
+    ("residual", "l2", "preset.residual must be one of absolute, sqrt, relative, got 'l2'")])
 def test_a_preset_names_a_bad_network_setting(field, value, message):
     with pytest.raises(InputError, match=re.escape(message)):
         Preset.from_config(**{field: value})
 
 
 def test_a_relative_residual_weighs_a_dark_material_as_much_as_a_bright_one():
-    """Half the object ten times darker: its pixels weigh ten times more, the weights average 1
+    """Half the object ten times darker: its pixels weigh ten times more (√10 with ``sqrt``), the weights average 1
     over the object, a black pixel is held at ten times the median's weight, off-object is 0."""
     images = torch.full((4, 3, 2, 6), 0.8)
     images[..., 3:] = 0.08
@@ -109,6 +109,9 @@ def test_a_relative_residual_weighs_a_dark_material_as_much_as_a_bright_one():
     assert weight[0, 5] / weight[0, 0] == pytest.approx(0.8 / (0.1 * 0.08))   # floor: 0.1 × median
     assert (weight * mask[0, 0]).sum() / mask.sum() == pytest.approx(1)
     assert weight[1, 0] == 0
+    halfway = residual_weight(images, mask, "sqrt")[0, 0]
+    assert halfway[0, 4] / halfway[0, 0] == pytest.approx(10 ** 0.5)
+    assert (halfway * mask[0, 0]).sum() / mask.sum() == pytest.approx(1)
 
 
 def test_the_global_term_equals_concatenating_the_features_to_every_image():

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 from unps.errors import InputError
 
-RESIDUALS = ("absolute", "relative")
+RESIDUALS = ("absolute", "sqrt", "relative")
 
 
 @dataclass(frozen=True)
@@ -26,9 +26,10 @@ class Schedule:
         prior_weight: weight of the prior ‖N_o − N_init‖² toward the robust initialisation.
         prior_steps: the prior holds for the first this many steps.
         update_every: depth and the interreflection kernel are rebuilt from N_o this often (100).
-        residual: how each pixel's L1 residual enters the loss: ``absolute`` (the paper's) or
+        residual: how each pixel's L1 residual enters the loss: ``absolute`` (the paper's),
             ``relative``, divided by the pixel's mean brightness over the images (floored at a
-            tenth of the object's median), so that dark materials weigh as much as bright ones.
+            tenth of the object's median), so that dark materials weigh as much as bright ones,
+            or ``sqrt``, divided by the square root of that brightness (half-way, in log terms).
     """
 
     steps: int = 1000

@@ -61,7 +61,8 @@ def residual_weight(images: torch.Tensor, mask: torch.Tensor, residual: str,
         mask: (1, 1, H, W) float, 1 on the object.
         residual: ``absolute``: every pixel 1; ``relative``: 1 / the pixel's mean brightness over
             the images and channels, that brightness floored at ``floor`` × its median over the
-            object, the weights scaled to mean 1 over the object and 0 off it.
+            object; ``sqrt``: 1 / √(that floored brightness). The weights are scaled to mean 1
+            over the object and are 0 off it.
 
     Returns:
         (1, 1, H, W) weights.
@@ -77,6 +78,8 @@ def residual_weight(images: torch.Tensor, mask: torch.Tensor, residual: str,
     brightness = images.mean((0, 1), keepdim=True)
     least = floor * brightness[mask > 0].median()
     weight = 1 / brightness.clamp_min(float(least) if least > 0 else 1e-12)
+    if residual == "sqrt":
+        weight = weight.sqrt()
     return weight * mask * mask.sum() / (weight * mask).sum()
 
 
