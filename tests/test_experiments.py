@@ -15,7 +15,6 @@ from unps.data.writer import write_diligent
 from unps.errors import InputError
 from unps.fit import fit
 from unps.io.images import write_png8
-from unps.metrics import angular_error
 from unps.plan import expand, plan, print_plan
 from unps.report import report
 
@@ -367,27 +366,3 @@ def test_sheet_jars_scores_the_shipped_network_on_a_walled_jar_of_the_vases_outl
     error = sheets.symmetric_error(net, walled, stacks=2, resolution=config["recipe"]["resolution"])
     assert 0 < error < 20                                 # 7° over 48 stacks (its README)
 
-
-def test_black_pixels_are_told_by_the_storage_and_continued_from_the_lit_surface():
-    """A sphere with a black band: 2 steps of 8 bits are black, 3 are not; the band's normals,
-    scrambled, come back near the sphere's from the lit pixels around them."""
-    black_pixels = load_script("lb_black", "experiments/light_benchmark/black_pixels.py")
-    y, x = np.mgrid[-1:1:48j, -1:1:48j]
-    mask = x ** 2 + y ** 2 < 0.8
-    z = np.sqrt(np.clip(1 - x ** 2 - y ** 2, 0, None))
-    sphere = np.stack([x, -y, z], -1)                     # rows run down: y up is −row
-    sphere /= np.linalg.norm(sphere, axis=-1, keepdims=True)
-    images = np.full((4, 48, 48, 3), 0.5)
-    band = mask & (np.abs(x - 0.1) < 0.15)
-    images[:, band] = 2 / 255
-    images[0, 10, 10] = 3 / 255
-    black = black_pixels.black_everywhere(images, mask, 255)
-    assert np.array_equal(black, band)
-    assert not black_pixels.black_everywhere(images, mask, 65535).any()
-    scrambled = sphere.copy()
-    scrambled[band] = [0.6, 0.0, 0.8]
-    continued = black_pixels.continue_surface(scrambled, mask, band)
-    assert np.array_equal(continued[~band], scrambled[~band])
-    before = angular_error(scrambled[band], sphere[band]).mean()
-    after = angular_error(continued[band], sphere[band]).mean()
-    assert before > 20 and after < 5

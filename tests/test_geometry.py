@@ -5,8 +5,9 @@ import torch
 from unps.data.analytic import height_field
 from unps.grid import Frame
 from unps import geometry
-from unps.geometry import depth_to_mesh, integrate_normals
+from unps.geometry import continue_surface, depth_to_mesh, integrate_normals
 from unps.io.mesh import write_ply
+from unps.metrics import angular_error
 
 
 @pytest.mark.parametrize("shape, tolerance", [("sphere", 1e-4), ("bumps", 0.05)])
@@ -83,3 +84,40 @@ def test_cast_shadows_match_marching_every_sample_along_every_ray():
         expected = marched_everywhere(depth, mask, lights.astype(np.float32), pitch, 20)
         assert expected.any() and not expected[0].any()
         np.testing.assert_array_equal(got.numpy(), expected)
+
+
+def sphere_normals(size: int = 48, edge: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(H, W, 3) unit normals of a sphere of radius 1 over [−1, 1]², its mask (r² < 0.8), and x."""
+    y, x = np.mgrid[-1:1:size * 1j, -1:1:size * 1j]
+    mask = x ** 2 + y ** 2 < 0.8
+    normals = np.stack([x, -y, np.sqrt(np.clip(1 - x ** 2 - y ** 2, 0, None))], -1)   # y up = −row
+    return normals / np.linalg.norm(normals, axis=-1, keepdims=True), mask, x
+
+
+def test_a_region_the_images_miss_is_continued_from_the_surface_around_it():
+    """A band of scrambled normals across a sphere comes back within a few degrees of the sphere's;
+    every other pixel is kept as it was; with nothing unseen, nothing changes."""
+    sphere, mask, x = sphere_normals()
+    band = mask & (np.abs(x - 0.1) < 0.15)
+    scrambled = sphere.copy()
+    scrambled[band] = [0.6, 0.0, 0.8]
+    continued = continue_surface(scrambled, mask, band)
+    np.testing.assert_array_equal(continued[~band], scrambled[~band].astype(np.float32))
+    assert angular_error(scrambled[band], sphere[band]).mean() > 20
+    assert angular_error(continued[band], sphere[band]).mean() < 5
+    np.testing.assert_array_equal(continue_surface(scrambled, mask, np.zeros_like(mask)),
+                                  scrambled.astype(np.float32))
+
+
+def test_an_unseen_region_at_the_image_border_is_continued_without_wrapping_around():
+    """A bowl z = 0.01·(col² + row²) filling the frame, its last three columns unseen: their
+    normals come back from the columns before them (straight on: the bowl's curvature is not
+    continued), not from the frame's other side."""
+    rows, cols = np.mgrid[0:20, 0:24].astype(float)
+    normals = np.stack([-0.02 * cols, 0.02 * rows, np.ones_like(rows)], -1)   # (−∂z/∂col, ∂z/∂row, 1)
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    full = np.ones((20, 24), bool)
+    unseen = np.zeros_like(full)
+    unseen[:, -3:] = True
+    continued = continue_surface(np.where(unseen[..., None], [0.0, 0.0, 1.0], normals), full, unseen)
+    assert angular_error(continued[unseen], normals[unseen]).max() < 8     # wrapped around: > 40°

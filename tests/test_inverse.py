@@ -11,6 +11,7 @@ from hydra import compose, initialize_config_module
 
 from unps.data.analytic import render_lambertian
 from unps.errors import Diverged, InputError
+from unps.geometry import continue_surface
 from unps.fit import fit
 from unps.inverse.fit import (FAR_FROM_START_DEG, build_system, distance_from_start, interreflection_bend,
                               neural_inverse_rendering)
@@ -367,6 +368,32 @@ def test_interreflection_off_and_in_memory_fits(sphere):
         assert info["interreflection"] is enabled
         assert (info["interreflection_bend_deg"] >= 0) if enabled else info["interreflection_bend_deg"] is None
         assert info["moved_from_start_deg"] > 0
+
+
+def test_pixels_black_in_every_image_get_the_surface_continued(caplog):
+    """An 8-bit sphere with a band black in all its images: with ``continue_black`` (default) the
+    band's normals are the fitted ones continued across it and the rest are the same as without;
+    ``black_share`` is the band's share either way."""
+    sphere = render_lambertian("sphere", size=32, n_lights=12, seed=2)
+    images = np.round(sphere.images / sphere.images.max() * 255) / 255
+    band = sphere.mask & (np.abs(np.arange(32) - 18) < 3)[None, :]
+    images[:, band] = np.where(np.arange(12)[:, None, None] % 2, 1 / 255, 0)   # levels 0 and 1
+    dark = sphere.replace(images=images.astype(np.float32), light_intensities=None)   # as captured
+    caplog.set_level("INFO")
+    def fitted(continue_black: bool):
+        torch.manual_seed(0)
+        return neural_inverse_rendering(dark, sphere.light_directions,
+                                        Preset.from_config(**TINY, continue_black=continue_black),
+                                        InterreflectionModel(enabled=False))
+
+    continued, plain = fitted(True), fitted(False)
+    share = band.sum() / sphere.mask.sum()
+    assert continued.info["black_share"] == plain.info["black_share"] == pytest.approx(share)
+    np.testing.assert_array_equal(continued.normals[~band], plain.normals[~band])
+    expected = continue_surface(plain.normals, sphere.mask, band)
+    np.testing.assert_allclose(continued.normals[band], expected[band], atol=1e-4)
+    assert angular_error(continued.normals[band], plain.normals[band]).mean() > 1
+    assert "of the object is black in every image" in caplog.text and "continued" in caplog.text
 
 
 @pytest.mark.parametrize("tilt, warned", [(5.0, False), (30.0, True)])

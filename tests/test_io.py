@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import scipy.io
 
+from unps.data.checks import black_everywhere
 from unps.data.diligent import read_diligent, read_folder
 from unps.data.writer import write_diligent
 from unps.errors import InputError
@@ -252,3 +253,24 @@ def test_a_nan_in_an_image_names_the_file_and_the_pixel(tmp_path, sphere):
     cv2.imwrite(str(first), image)
     with pytest.raises(InputError, match=rf"{first.name}: contains NaN or Inf \(first at row 3, column 6"):
         read_diligent(tmp_path / "obj")
+
+
+@pytest.mark.parametrize("dtype, scale, quantization, black", [
+    (np.uint8, 1, "round", [1, 1, 1, 0, 0]), (np.uint8, 1, "floor", [1, 1, 1, 0, 0]),
+    (np.uint16, 257, "round", [1, 0, 0, 0, 0])])
+def test_black_in_every_image_means_the_stacks_two_lowest_levels(tmp_path, dtype, scale, quantization,
+                                                                    black):
+    """Pixels whose every value is at most the stack's second level are black, in 8-bit files read
+    as round or floor; in a 16-bit capture, whose noise reaches a few of its own levels, the same
+    light (8-bit levels times 257) is signal."""
+    peaks = np.array([0, 1, 2, 3, 200]) * scale                   # each pixel's brightest value
+    rest = np.array([5 if dtype == np.uint16 else 0, 1, 1, 1, 200]) * np.array([1, scale, scale, scale, scale])
+    stack = []
+    for k in range(3):
+        levels = np.repeat((peaks if k == 1 else rest)[None, :, None], 3, -1).astype(dtype)
+        cv2.imwrite(str(tmp_path / f"{k}.png"), levels)
+        stack.append(read_image(tmp_path / f"{k}.png", quantization))
+    mask = np.ones((1, 5), bool)
+    np.testing.assert_array_equal(black_everywhere(np.stack(stack), mask)[0], np.array(black, bool))
+    coarse = np.full((2, 1, 5, 3), 10 / 255)                      # no value below level 10: can't tell
+    assert not black_everywhere(coarse, mask).any()

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.ndimage import binary_dilation
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import spsolve
 import torch
@@ -64,6 +65,75 @@ def integrate_normals(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
     depth = np.full((h, w), np.nan, np.float32)
     depth[mask] = z
     return depth
+
+
+def continue_surface(normals: np.ndarray, mask: np.ndarray, unseen: np.ndarray,
+                     smoothness: float = 1.0) -> np.ndarray:
+    """``normals`` with the ``unseen`` pixels' replaced by those of the least-curved depth that
+    follows the normals between seen neighbours: the surface continued across a region the
+    images say nothing about.
+
+    The depth z over the mask minimises :func:`integrate_normals`' equations (n̄_z Δz = −n̄_x along
+    +col, n̄_z Δz = n̄_y along +row) for pairs of seen pixels, plus ``smoothness``² Σ (second
+    difference of z)² centred on unseen pixels and their neighbours. The unseen pixels' normals
+    are (−∂z/∂x, −∂z/∂y, 1) normalised, from central differences where both neighbours are on the
+    object and one-sided ones elsewhere (+y is −row).
+
+    Args:
+        normals: (H, W, 3) unit normals.
+        mask: (H, W) bool; unseen: (H, W) bool, inside the mask.
+
+    Returns:
+        (H, W, 3) float32; equal to ``normals`` outside ``unseen``.
+    """
+    out = normals.astype(np.float32, copy=True)
+    if not unseen.any():
+        return out
+    h, w = mask.shape
+    index = -np.ones((h, w), np.int64)
+    index[mask] = np.arange(mask.sum())
+    n = normals.astype(np.float64)
+    seen = mask & ~unseen
+    rows, cols, values, rhs = [], [], [], []
+
+    def add(columns: list[np.ndarray], weights: list, target: np.ndarray) -> None:
+        first = sum(len(r) for r in rhs)
+        equation = np.arange(first, first + target.size)
+        for column, weight in zip(columns, weights):
+            rows.append(equation)
+            cols.append(column)
+            values.append(np.broadcast_to(weight, (target.size,)))
+        rhs.append(target)
+
+    for (dr, dc), sign in (((0, 1), -1.0), ((1, 0), 1.0)):
+        a, b = index[: h - dr, : w - dc], index[dr:, dc:]
+        ok = (a >= 0) & (b >= 0) & seen[: h - dr, : w - dc] & seen[dr:, dc:]
+        mean = (n[: h - dr, : w - dc] + n[dr:, dc:])[ok] / 2
+        add([b[ok], a[ok]], [mean[:, 2], -mean[:, 2]], sign * (mean[:, 0] if dc else mean[:, 1]))
+    near = binary_dilation(unseen, np.ones((3, 3), bool))
+    for dr, dc in ((0, 1), (1, 0)):
+        a, centre = index[: h - 2 * dr, : w - 2 * dc], index[dr: h - dr, dc: w - dc]
+        b = index[2 * dr:, 2 * dc:]
+        ok = (a >= 0) & (centre >= 0) & (b >= 0) & near[dr: h - dr, dc: w - dc]
+        add([a[ok], centre[ok], b[ok]], [smoothness, -2 * smoothness, smoothness], np.zeros(int(ok.sum())))
+    m = int(mask.sum())
+    system = sp.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))),
+                           shape=(sum(len(r) for r in rhs), m))
+    z = spsolve((system.T @ system + 1e-8 * sp.eye(m)).tocsc(), system.T @ np.concatenate(rhs))
+    depth = np.zeros((h + 2, w + 2))              # a border off the object: no wrap-around
+    on = np.pad(mask, 1)
+    depth[on] = z
+    slopes = []
+    for axis in (1, 0):
+        ahead, behind = np.roll(depth, -1, axis), np.roll(depth, 1, axis)
+        on_ahead, on_behind = np.roll(on, -1, axis), np.roll(on, 1, axis)
+        slope = np.where(on_ahead & on_behind, (ahead - behind) / 2,
+                         np.where(on_ahead, ahead - depth, np.where(on_behind, depth - behind, 0)))
+        slopes.append(slope[1:-1, 1:-1])
+    continued = np.stack([-slopes[0], slopes[1], np.ones((h, w))], -1)
+    continued /= np.linalg.norm(continued, axis=-1, keepdims=True)
+    out[unseen] = continued[unseen]
+    return out
 
 
 def depth_to_mesh(depth: np.ndarray, mask: np.ndarray, frame: Frame | None = None

@@ -27,6 +27,7 @@ MAX_CONDITION = 30.0    # σ1/σ3 of the light matrix above which a warning says
 MIN_SPAN = 1e-3         # σ3/σ1 below which the lights do not span 3D at all
 TOP_LEVEL = 1 - 1e-5     # a value this close to its channel's maximum sits at the top level (closer
                          # than one 16-bit level, looser than float32 rounding after dividing by intensities)
+FIRST_LEVEL_AT_MOST = 2 / 255     # above an 8-bit file's first level (1/255 read as round, 1.5/255 as floor)
 MIN_CLIPPED_VALUES = 8   # a top level held by this many values is a clipping plateau, not one bright pixel
 CLIPPED_WARNING = 0.02  # share of the object's values at the top level that warns
 DARK_WARNING = 0.5      # share of the object's values that are exactly 0 that warns
@@ -103,6 +104,37 @@ def clipped_values(images: np.ndarray, mask: np.ndarray) -> np.ndarray:
     plateau = at_top.sum(axis=(0, 1)) >= MIN_CLIPPED_VALUES     # (3,)
     clipped[:, mask] = (at_top & plateau).any(-1)
     return clipped
+
+
+def black_everywhere(images: np.ndarray, mask: np.ndarray, levels: int = 2) -> np.ndarray:
+    """Object pixels that are black in every image: no value above the stack's ``levels`` lowest
+    quantisation levels, in any image or channel. Such a pixel holds no shading, so any normal
+    explains it.
+
+    The first level is the smallest positive value over the object (1/255 for 8-bit files, 1.5/255
+    for 8-bit files read as ``floor``, far less for 16-bit captures, whose noise fills the lowest
+    levels); a stack with no positive value below 2/255 has no quantisation step to go by, and
+    nothing in it is called black.
+
+    Args:
+        images: (n, H, W, 3) as captured; mask: (H, W) bool.
+
+    Returns:
+        (H, W) bool, False off the mask.
+
+    Example:
+        >>> images = np.array([[0, 1, 2, 3], [2, 0, 1, 9]], float).reshape(2, 1, 4, 1).repeat(3, -1) / 255
+        >>> black_everywhere(images, np.ones((1, 4), bool)).astype(int)
+        array([[1, 1, 1, 0]])
+    """
+    values = images[:, mask]
+    positive = values[values > 0]
+    first = float(positive.min()) if positive.size else 0.0
+    if first == 0.0 or first > FIRST_LEVEL_AT_MOST:
+        return np.zeros(mask.shape, bool)
+    peak = np.zeros(mask.shape, images.dtype)
+    peak[mask] = values.max(axis=(0, 2))
+    return mask & (peak <= levels * first * (1 + 1e-4))
 
 
 def value_levels(images: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -22,10 +22,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from unps.data.checks import black_everywhere
 from unps.data.estimate import Estimate, Rendering
 from unps.data.subject import Subject
 from unps.device import resolve_device
 from unps.errors import InputError
+from unps.geometry import continue_surface
 from unps.inverse.control import fingerprint, train
 from unps.inverse.grids import on_subject_grid, unclipped, upsample_with_detail, working_factor
 from unps.inverse.interreflection import Interreflection
@@ -101,8 +103,17 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
             fine_init = initial_estimate(cropped, light_directions, preset.init, device).normals
             normals = upsample_with_detail(normals, coarse_init, fine_init,
                                            work.mask, factor)
+        black = black_everywhere(cropped.observed_images(), cropped.mask)
+        if preset.continue_black and black.any():
+            normals = continue_surface(normals, cropped.mask, black)
         directions, scales = rendering["light_directions"], rendering["light_scales"]
         normals, albedo = on_subject_grid(normals, cropped, subject, directions, scales)
+    black_share = float(black.sum() / cropped.mask.sum())
+    if black.any():
+        log.info("%.1f%% of the object is black in every image (no value above its two lowest "
+                 "levels): its normals are %s", 100 * black_share,
+                 "the surface continued from the pixels around it" if preset.continue_black else
+                 "the normal network's guess (preset.continue_black=false)")
     if bend is not None:
         log.info("interreflections bend the rendered normals by %.2f° on average (%.2f° at most)",
                  bend["mean"], bend["max"])
@@ -111,7 +122,8 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
             "parameters": parameters, "facets": solver.n_facets if solver else 0, "preset": preset.name,
             "interreflection": interreflection.enabled,
             "facet_downsample": solver.factor if solver else None,
-            "interreflection_bend_deg": bend["mean"] if bend else None, "moved_from_start_deg": moved}
+            "interreflection_bend_deg": bend["mean"] if bend else None, "moved_from_start_deg": moved,
+            "black_share": black_share}
     rendering = Rendering(work.mask, work.images, rendering["reconstruction"], rendering["reflectance"])
     return Estimate(normals, albedo, light_directions=directions if refine_lights else None,
                     light_scales=scales if refine_lights else None, rendering=rendering, info=info)

@@ -28,6 +28,10 @@ class Preset:
             smallest whole factor that fits, and the normals upsampled back. None = full resolution.
         cast_shadows: beyond the paper, render the shadows that the fitted surface casts, from its
             depth at each update (:func:`unps.inverse.system.visibility`).
+        continue_black: beyond the paper, the read-out's normals of pixels black in every image
+            (:func:`unps.data.checks.black_everywhere`: the images hold no shading there) are
+            those of the surface continued from the pixels around them
+            (:func:`unps.geometry.continue_surface`), not the normal network's guess.
         schedule: the optimisation's :class:`Schedule`.
     """
 
@@ -42,6 +46,7 @@ class Preset:
     cast_shadows: bool = True
     batch_norm: bool = True
     init: str = "robust"
+    continue_black: bool = True
     schedule: Schedule = Schedule()
 
     def __post_init__(self):
@@ -51,7 +56,7 @@ class Preset:
                              f"{self.reflectance_branch!r}")
         if self.init not in INITS:
             raise InputError(f"preset.init must be one of {', '.join(INITS)}, got {self.init!r}")
-        for name in ("batch_norm", "cast_shadows"):
+        for name in ("batch_norm", "cast_shadows", "continue_black"):
             if not isinstance(getattr(self, name), bool):
                 raise InputError(f"preset.{name} must be true or false, got {getattr(self, name)!r}")
 
