@@ -89,6 +89,7 @@ def test_batch_norm_reads_out_with_the_statistics_it_was_fitted_with():
     ("reflectance_branch", 2.5, "preset.reflectance_branch must be a whole number >= 1, got 2.5"),
     ("batch_norm", "yes", "preset.batch_norm must be true or false, got 'yes'"),
     ("cast_shadows", 1, "preset.cast_shadows must be true or false, got 1"),
+    ("continue_black", "yes", "preset.continue_black must be true or false, got 'yes'"),
     ("init", "woodham", "preset.init must be one of robust, least_squares, got 'woodham'"),
     ("residual", "l2", "preset.residual must be one of absolute, sqrt, relative, got 'l2'")])
 def test_a_preset_names_a_bad_network_setting(field, value, message):

@@ -38,20 +38,7 @@ def integrate_normals(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
     h, w = mask.shape
     index = -np.ones((h, w), dtype=np.int64)
     index[mask] = np.arange(mask.sum())
-    n = normals.astype(np.float64)
-    rows, cols, rhs, weights = [], [], [], []
-    for (dr, dc), sign in (((0, 1), -1.0), ((1, 0), 1.0)):   # sign: −n_x along col, +n_y along row
-        a = index[: h - dr, : w - dc]
-        b = index[dr:, dc:]
-        ok = (a >= 0) & (b >= 0)
-        mean = (n[: h - dr, : w - dc] + n[dr:, dc:])[ok] / 2
-        component = mean[:, 0] if dc else mean[:, 1]
-        rows.append(a[ok])
-        cols.append(b[ok])
-        weights.append(mean[:, 2])
-        rhs.append(sign * component)
-    first, second = np.concatenate(rows), np.concatenate(cols)
-    nz, target = np.concatenate(weights), np.concatenate(rhs)
+    first, second, nz, target = orientation_equations(normals, index, mask)
     m, e = int(mask.sum()), first.size
     eq = np.arange(e)
     a = sp.csr_matrix((np.concatenate([nz, -nz]), (np.concatenate([eq, eq]),
@@ -65,6 +52,35 @@ def integrate_normals(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
     depth = np.full((h, w), np.nan, np.float32)
     depth[mask] = z
     return depth
+
+
+def orientation_equations(normals: np.ndarray, index: np.ndarray, use: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`integrate_normals`' equations n̄_z (z_second − z_first) = target, one per pair of
+    neighbouring pixels (along +col, then along +row) that are both in ``use``.
+
+    Args:
+        normals: (H, W, 3) unit normals; index: (H, W) each object pixel's unknown, −1 off it;
+        use: (H, W) bool.
+
+    Returns:
+        first, second: (e,) the pair's unknowns; nz: (e,) n̄_z; target: (e,) −n̄_x along +col, n̄_y
+        along +row.
+    """
+    h, w = index.shape
+    n = normals.astype(np.float64)
+    rows, cols, rhs, weights = [], [], [], []
+    for (dr, dc), sign in (((0, 1), -1.0), ((1, 0), 1.0)):   # sign: −n_x along col, +n_y along row
+        a = index[: h - dr, : w - dc]
+        b = index[dr:, dc:]
+        ok = (a >= 0) & (b >= 0) & use[: h - dr, : w - dc] & use[dr:, dc:]
+        mean = (n[: h - dr, : w - dc] + n[dr:, dc:])[ok] / 2
+        component = mean[:, 0] if dc else mean[:, 1]
+        rows.append(a[ok])
+        cols.append(b[ok])
+        weights.append(mean[:, 2])
+        rhs.append(sign * component)
+    return np.concatenate(rows), np.concatenate(cols), np.concatenate(weights), np.concatenate(rhs)
 
 
 def continue_surface(normals: np.ndarray, mask: np.ndarray, unseen: np.ndarray,
@@ -92,8 +108,6 @@ def continue_surface(normals: np.ndarray, mask: np.ndarray, unseen: np.ndarray,
     h, w = mask.shape
     index = -np.ones((h, w), np.int64)
     index[mask] = np.arange(mask.sum())
-    n = normals.astype(np.float64)
-    seen = mask & ~unseen
     rows, cols, values, rhs = [], [], [], []
 
     def add(columns: list[np.ndarray], weights: list, target: np.ndarray) -> None:
@@ -105,11 +119,8 @@ def continue_surface(normals: np.ndarray, mask: np.ndarray, unseen: np.ndarray,
             values.append(np.broadcast_to(weight, (target.size,)))
         rhs.append(target)
 
-    for (dr, dc), sign in (((0, 1), -1.0), ((1, 0), 1.0)):
-        a, b = index[: h - dr, : w - dc], index[dr:, dc:]
-        ok = (a >= 0) & (b >= 0) & seen[: h - dr, : w - dc] & seen[dr:, dc:]
-        mean = (n[: h - dr, : w - dc] + n[dr:, dc:])[ok] / 2
-        add([b[ok], a[ok]], [mean[:, 2], -mean[:, 2]], sign * (mean[:, 0] if dc else mean[:, 1]))
+    first, second, nz, target = orientation_equations(normals, index, mask & ~unseen)
+    add([second, first], [nz, -nz], target)
     near = binary_dilation(unseen, np.ones((3, 3), bool))
     for dr, dc in ((0, 1), (1, 0)):
         a, centre = index[: h - 2 * dr, : w - 2 * dc], index[dr: h - dr, dc: w - dc]
