@@ -91,7 +91,7 @@ def test_batch_norm_reads_out_with_the_statistics_it_was_fitted_with():
     ("cast_shadows", 1, "preset.cast_shadows must be true or false, got 1"),
     ("continue_black", "yes", "preset.continue_black must be true or false, got 'yes'"),
     ("init", "woodham", "preset.init must be one of robust, least_squares, got 'woodham'"),
-    ("residual", "l2", "preset.residual must be one of absolute, sqrt, relative, got 'l2'")])
+    ("residual", "l2", "preset.residual must be one of absolute, sqrt, relative, albedo, got 'l2'")])
 def test_a_preset_names_a_bad_network_setting(field, value, message):
     with pytest.raises(InputError, match=re.escape(message)):
         Preset.from_config(**{field: value})
@@ -114,6 +114,23 @@ def test_a_relative_residual_weighs_a_dark_material_as_much_as_a_bright_one():
     halfway = residual_weight(images, mask, "sqrt")[0, 0]
     assert halfway[0, 4] / halfway[0, 0] == pytest.approx(10 ** 0.5)
     assert (halfway * mask[0, 0]).sum() / mask.sum() == pytest.approx(1)
+
+
+def test_an_albedo_residual_weighs_by_the_material_not_by_how_lit_a_pixel_is():
+    """Same images, but the right half is dark because the shape hides it (its albedo as bright
+    as the left's): ``albedo`` leaves it at weight 1 where ``relative`` gives it 10; a material
+    ten times darker gets 10."""
+    images = torch.full((4, 3, 2, 6), 0.8)
+    images[..., 3:] = 0.08
+    mask = torch.ones(1, 1, 2, 6)
+    albedo = torch.full((1, 1, 2, 6), 0.5)
+    assert torch.allclose(residual_weight(images, mask, "albedo", albedo), mask)
+    albedo[..., 4:] = 0.05
+    weight = residual_weight(images, mask, "albedo", albedo)[0, 0]
+    assert weight[0, 5] / weight[0, 0] == pytest.approx(10)
+    assert weight.mean() == pytest.approx(1)
+    with pytest.raises(ValueError, match="needs the albedo"):
+        residual_weight(images, mask, "albedo")
 
 
 def test_the_global_term_equals_concatenating_the_features_to_every_image():
@@ -234,6 +251,28 @@ def test_the_fit_starts_from_the_initialisation_the_preset_names(sphere, init):
     init_normals = system.init_normals[0].permute(1, 2, 0).numpy()[sphere.mask]
     np.testing.assert_allclose(init_normals, start.normals[sphere.mask], atol=1e-6)
     assert angular_error(init_normals, other.normals[sphere.mask]).mean() > 0.5   # measured: 1.9°
+
+
+def test_the_albedo_residual_is_weighed_by_the_initialisations_albedo(sphere):
+    """A sphere painted half ten times darker: ``preset.residual=albedo`` weighs its dark half up by
+    about ten, from the robust initialisation's albedo, not from the images' brightness."""
+    from unps.solvers.rpca import robust_init
+
+    half = sphere.resolution[1] // 2
+    shade = np.where(np.arange(sphere.resolution[1]) < half, 1.0, 0.1)
+    painted = sphere.replace(images=sphere.images * shade[None, None, :, None])
+    system, _ = build_system(painted, painted.light_directions,
+                             Preset.from_config(**TINY, residual="albedo"),
+                             InterreflectionModel(enabled=False), False, "test")
+    albedo = robust_init(painted, painted.light_directions).albedo.mean(-1)
+    expected = residual_weight(system.images, system.mask, "albedo",
+                               torch.as_tensor(albedo, dtype=torch.float32)[None, None])
+    torch.testing.assert_close(system.pixel_weight, expected)
+    weight = system.pixel_weight[0, 0].numpy()
+    left, right = sphere.mask.copy(), sphere.mask.copy()
+    left[:, half:] = False
+    right[:, :half] = False
+    assert np.median(weight[right]) / np.median(weight[left]) == pytest.approx(10, rel=0.05)
 
 
 def sphere_system(prior_weight):

@@ -170,7 +170,8 @@ def build_system(work: Subject, light_directions: np.ndarray, preset: Preset,
         torch.as_tensor(init.normals).permute(2, 0, 1).contiguous(), solver, preset.schedule,
         refine_lights=refine_lights, true_normals=true_normals, fingerprint=run_fingerprint,
         usable=None if usable is None else torch.as_tensor(usable)[:, None],
-        shadows=preset.cast_shadows)
+        shadows=preset.cast_shadows,
+        albedo=torch.as_tensor(init.albedo.mean(-1), dtype=torch.float32)[None, None])
     return system, scale
 
 

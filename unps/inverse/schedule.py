@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 from unps.errors import InputError
 
-RESIDUALS = ("absolute", "sqrt", "relative")
+RESIDUALS = ("absolute", "sqrt", "relative", "albedo")
 
 
 @dataclass(frozen=True)
@@ -29,7 +29,9 @@ class Schedule:
         residual: how each pixel's L1 residual enters the loss: ``absolute`` (the paper's),
             ``relative``, divided by the pixel's mean brightness over the images (floored at a
             tenth of the object's median), so that dark materials weigh as much as bright ones,
-            or ``sqrt``, divided by the square root of that brightness (half-way, in log terms).
+            ``sqrt``, divided by the square root of that brightness (half-way, in log terms), or
+            ``albedo``, divided by the initialisation's albedo (floored alike): the residual in
+            shading units, which weighs a dark material up but not a pixel the shape keeps dark.
     """
 
     steps: int = 1000

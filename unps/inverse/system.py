@@ -53,7 +53,7 @@ def visibility(normals: np.ndarray, mask: np.ndarray, directions: torch.Tensor) 
 
 
 def residual_weight(images: torch.Tensor, mask: torch.Tensor, residual: str,
-                    floor: float = 0.1) -> torch.Tensor:
+                    albedo: torch.Tensor | None = None, floor: float = 0.1) -> torch.Tensor:
     """Each pixel's weight in the L1 loss (``preset.residual``).
 
     Args:
@@ -61,8 +61,11 @@ def residual_weight(images: torch.Tensor, mask: torch.Tensor, residual: str,
         mask: (1, 1, H, W) float, 1 on the object.
         residual: ``absolute``: every pixel 1; ``relative``: 1 / the pixel's mean brightness over
             the images and channels, that brightness floored at ``floor`` × its median over the
-            object; ``sqrt``: 1 / √(that floored brightness). The weights are scaled to mean 1
-            over the object and are 0 off it.
+            object; ``sqrt``: 1 / √(that floored brightness); ``albedo``: 1 / ``albedo``, floored
+            the same way (the residual in shading units: a dark material counts as much as a
+            bright one, a pixel dark because the shape hides it from the lights does not). The
+            weights are scaled to mean 1 over the object and are 0 off it.
+        albedo: (1, 1, H, W) the initialisation's albedo (any scale), for ``albedo``.
 
     Returns:
         (1, 1, H, W) weights.
@@ -75,7 +78,12 @@ def residual_weight(images: torch.Tensor, mask: torch.Tensor, residual: str,
     """
     if residual == "absolute":
         return torch.ones_like(mask)
-    brightness = images.mean((0, 1), keepdim=True)
+    if residual == "albedo":
+        if albedo is None:
+            raise ValueError("residual='albedo' needs the albedo")
+        brightness = albedo
+    else:
+        brightness = images.mean((0, 1), keepdim=True)
     least = floor * brightness[mask > 0].median()
     weight = 1 / brightness.clamp_min(float(least) if least > 0 else 1e-12)
     if residual == "sqrt":
@@ -108,13 +116,15 @@ class InverseRendering(L.LightningModule):
         fingerprint: identifies the run; stored in checkpoints so a resume cannot mix runs.
         usable: (n, 1, H, W) 1 where a value may enter the loss, 0 where it is clipped; None: all.
         shadows: render the shadows that the current surface casts (V_i above).
+        albedo: (1, 1, H, W) the initialisation's albedo, for ``preset.residual=albedo``.
     """
 
     def __init__(self, normal_net: NormalNet, reflectance_net: ReflectanceNet, images: torch.Tensor,
                  mask: np.ndarray, light_directions: torch.Tensor, init_normals: torch.Tensor,
                  interreflection: Interreflection | None, schedule: Schedule,
                  refine_lights: bool = False, true_normals: torch.Tensor | None = None,
-                 fingerprint: str = "", usable: torch.Tensor | None = None, shadows: bool = False):
+                 fingerprint: str = "", usable: torch.Tensor | None = None, shadows: bool = False,
+                 albedo: torch.Tensor | None = None):
         super().__init__()
         self.normal_net, self.reflectance_net = normal_net, reflectance_net
         self.schedule, self.interreflection = schedule, interreflection
@@ -134,7 +144,7 @@ class InverseRendering(L.LightningModule):
         self.register_buffer("true_normals", None if true_normals is None else true_normals[None],
                              persistent=False)
         self.register_buffer("visible", torch.ones(images.shape[0], 1, *mask.shape), persistent=False)
-        self.register_buffer("pixel_weight", residual_weight(images, self.mask, schedule.residual),
+        self.register_buffer("pixel_weight", residual_weight(images, self.mask, schedule.residual, albedo),
                              persistent=False)
         n = images.shape[0]
         self.light_offsets = torch.nn.Parameter(torch.zeros(n, 3), requires_grad=refine_lights)
