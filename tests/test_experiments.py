@@ -294,10 +294,10 @@ def test_light_benchmark_normals_reads_finished_rows_and_refuses_mixed_settings(
     (tmp_path / f"{obj.name}-rpca").mkdir()
     (tmp_path / f"{obj.name}-rpca" / "metrics.json").write_text(json.dumps({"normal_mae": 4.5}))
     assert normals.run_row(tmp_path / "nowhere", obj, "rpca", [], tmp_path)["normal_mae"] == 4.5
-    normals.check_settings(tmp_path, ["preset.prior_weight=0"])
-    normals.check_settings(tmp_path, ["preset.prior_weight=0"])
-    with pytest.raises(SystemExit, match=r"fitted with \['preset.prior_weight=0'\], not \[\]"):
-        normals.check_settings(tmp_path, [])
+    normals.runs.claim(tmp_path, ["preset.prior_weight=0"])
+    normals.runs.claim(tmp_path, ["preset.prior_weight=0"])
+    with pytest.raises(ValueError, match=r'made with \["preset.prior_weight=0"\], not \[\]'):
+        normals.runs.claim(tmp_path, [])
 
 
 def test_slant_script_remeasures_runs_and_their_seed_ensemble(tmp_path, capsys, monkeypatch):

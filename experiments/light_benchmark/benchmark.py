@@ -41,6 +41,7 @@ from unps.errors import InputError
 from unps.timing import recording
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import runs  # noqa: E402
 import scenes  # noqa: E402
 
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
@@ -220,13 +221,10 @@ def main():
     except (InputError, ConfigCompositionException) as e:
         parser.error(str(e))
     out = args.out or args.cache / "results" / args.tag
-    out.mkdir(parents=True, exist_ok=True)
-    made_with = {"stages": stage_names, "settings": args.settings, "scenes": scenes.SCENE_VERSION}
-    recorded = out / "settings.json"
-    if recorded.is_file() and json.loads(recorded.read_text()) != made_with:
-        parser.error(f"the results in {out} were made with other settings "
-                     f"({recorded.read_text().strip()}); give another --tag or --out")
-    recorded.write_text(json.dumps(made_with) + "\n")
+    try:
+        runs.claim(out, {"stages": stage_names, "settings": args.settings, "scenes": scenes.SCENE_VERSION})
+    except ValueError as e:
+        parser.error(str(e))
     print(f"stages: network → {' → '.join(stage_names) or '(none)'}; settings: "
           f"{' '.join(args.settings) or 'defaults'}; results in {out}")
     print(f"{'group':<9} {'case':<12} {'set':>3} {'network':>8} "

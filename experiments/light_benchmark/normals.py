@@ -33,6 +33,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import runs  # noqa: E402
 import scenes  # noqa: E402
 
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
@@ -59,18 +60,6 @@ def run_row(folder: Path, obj: scenes.BenchmarkObject, method: str, settings: li
     return json.loads(metrics.read_text())
 
 
-def check_settings(out: Path, settings: list[str]) -> None:
-    """Record the unps overrides of a run folder on first use; refuse other ones later, so that a
-    folder never mixes rows fitted with different settings."""
-    recorded = out / "settings.json"
-    if not recorded.is_file():
-        out.mkdir(parents=True, exist_ok=True)
-        recorded.write_text(json.dumps(settings))
-    elif json.loads(recorded.read_text()) != settings:
-        sys.exit(f"{out} holds rows fitted with {json.loads(recorded.read_text())}, not {settings}: "
-                 f"give another --tag or --out")
-
-
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
@@ -90,7 +79,10 @@ def main(argv=None) -> None:
     if unknown:
         sys.exit(f"--names: {', '.join(unknown)} not among the objects ({', '.join(sorted(known))})")
     out = args.out or args.cache / "normals" / args.tag
-    check_settings(out, args.settings)
+    try:
+        runs.claim(out, args.settings)
+    except ValueError as e:
+        parser.error(str(e))
 
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, "
           f"{'CUDA' if torch.cuda.is_available() else 'CPU'}; torch {torch.__version__}")
