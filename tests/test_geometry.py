@@ -86,6 +86,28 @@ def test_cast_shadows_match_marching_every_sample_along_every_ray():
         np.testing.assert_array_equal(got.numpy(), expected)
 
 
+def test_shadows_of_a_batch_are_each_image_s_shadows():
+    """Several depth maps under their own lights, one empty mask among them: the batch march gives
+    bit for bit what each map's own march gives, whatever the share of work marched at once."""
+    rng = np.random.default_rng(5)
+    y, x = np.mgrid[-1:1:20j, -1:1:20j]
+    depths, masks = [], []
+    for k in range(4):
+        bump = 0.8 * np.exp(-((x - 0.3 * k + 0.4) ** 2 + y ** 2) / 0.08) + 0.05 * rng.standard_normal((20, 20))
+        depths.append(torch.as_tensor(bump, dtype=torch.float32))
+        masks.append(torch.as_tensor(np.hypot(x, y) < 0.9 - 0.1 * k) if k < 3 else torch.zeros(20, 20, dtype=bool))
+    lights = torch.as_tensor(rng.standard_normal((4, 7, 3)), dtype=torch.float32)
+    lights[..., 2] = lights[..., 2].abs() + 0.2
+    lights = lights / lights.norm(dim=-1, keepdim=True)
+    each = torch.stack([geometry.cast_shadows(d, m, light, 0.1, steps=16)
+                        for d, m, light in zip(depths, masks, lights)])
+    assert each[:3].any() and not each[3].any()
+    for budget in (1, 2 ** 20):
+        plan = geometry.plan_shadows(torch.stack(depths), torch.stack(masks), lights, 0.1, steps=16)
+        batch = geometry.march_shadows(plan, torch.device("cpu"), budget=budget)
+        assert torch.equal(batch, each)
+
+
 def sphere_normals(size: int = 48, edge: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(H, W, 3) unit normals of a sphere of radius 1 over [−1, 1]², its mask (r² < 0.8), and x."""
     y, x = np.mgrid[-1:1:size * 1j, -1:1:size * 1j]

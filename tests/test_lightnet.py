@@ -231,20 +231,34 @@ def test_training_logs_a_progress_line_per_validation_with_its_figures(tmp_path,
 
 
 def test_the_sample_rate_leaves_out_the_first_steps_and_the_validations(monkeypatch):
+    from types import SimpleNamespace
+
     from unps.lightnet import callbacks
 
     clock = iter([1.0, 3.0, 4.0, 5.0, 11.0, 12.0, 20.0, 21.0])   # seconds, at each call below
     monkeypatch.setattr(callbacks.time, "perf_counter", lambda: next(clock))
     rate, batch = callbacks.SampleRate(skip=2), {"images": torch.zeros(4, 1)}
+    trainer, module = SimpleNamespace(max_steps=4, global_step=0), SimpleNamespace(device=torch.device("cpu"))
+
+    def step():
+        trainer.global_step += 1
+        rate.on_train_batch_end(trainer, module, None, batch, 0)
+
     for _ in range(2):
-        rate.on_train_batch_end(None, None, None, batch, 0)          # start-up: 1 s, 3 s
-    rate.on_train_batch_end(None, None, None, batch, 0)              # 4 s: 1 s, 4 samples
-    rate.on_validation_start(None, None)                             # 5 s
-    rate.on_validation_end(None, None)                               # 11 s
-    rate.on_train_batch_end(None, None, None, batch, 0)              # 12 s: 8 s, 6 of them validation
-    rate.on_validation_start(None, None)                             # the last validation: not counted
-    rate.on_validation_end(None, None)
+        step()                                                       # start-up: 1 s, 3 s
+    step()                                                           # 4 s: 1 s, 4 samples
+    rate.on_validation_start(trainer, module)                        # 5 s
+    rate.on_validation_end(trainer, module)                          # 11 s
+    step()                                                           # 12 s: 8 s, 6 of them validation
+    rate.on_validation_start(trainer, module)                        # the last validation: not counted
+    rate.on_validation_end(trainer, module)
     assert rate.samples_per_s == pytest.approx(8 / (1 + 2))
+
+
+def test_a_precision_other_than_float32_or_bfloat16_is_refused_by_name(tmp_path):
+    with pytest.raises(InputError, match=r"recipe.precision must be one of 32-true, bf16-mixed; got '16-mixed'"):
+        train(train_config(tmp_path, "recipe.precision=16-mixed"))
+    assert not any(tmp_path.iterdir())                              # nothing written
 
 
 def test_the_last_checkpoint_follows_every_validation_not_only_the_best(tmp_path):

@@ -1,5 +1,6 @@
 """The light network's training data: shape families, light layouts and the simulated camera."""
 
+import dataclasses
 import math
 
 import cv2
@@ -13,10 +14,12 @@ from torch.utils.data import DataLoader, default_collate
 from unps.errors import InputError
 from unps.io.images import read_image, write_png16
 from unps.lightnet import lathe
-from unps.lightnet.rig import FORMATS, LAYOUTS, Camera, draw_lights, expose, quantize, record
+from unps.lightnet.brdf import NeuralBRDF
+from unps.lightnet.materials import MaterialBank
+from unps.lightnet.rig import FORMATS, LAYOUTS, Camera, draw_lights, expose, noise_on, quantize, record
 from unps.lightnet.shapes import SHAPES, sample_generator
 from unps.lightnet.data import Draws, LightData
-from unps.lightnet.synthesis import LightDataset, Scene, render
+from unps.lightnet.synthesis import LightDataset, SceneBatch, render, render_batch
 
 
 def concave_share(depth: torch.Tensor, mask: torch.Tensor) -> float:
@@ -222,30 +225,83 @@ SCENE = dict(resolution=64, images=6, shapes=dict.fromkeys(SHAPES, 1.0), layouts
              camera=Camera(), paint=0.5, seed=11)
 
 
-def test_samples_drawn_in_a_worker_and_rendered_after_are_the_samples():
-    """The GPU route of the training data (draws in the workers, rendering in the training process),
-    taken on the CPU: bit for bit the samples the CPU route gives."""
+def test_samples_drawn_in_a_worker_and_rendered_as_a_batch_are_the_samples():
+    """The GPU route of the training data (draws in the workers, the batch rendered at once in the
+    training process), taken on the CPU: the samples the CPU route gives, to float rounding (a value
+    on the edge of a storage level may round to its neighbour)."""
     dataset = LightDataset(4, **SCENE)
-    draws = DataLoader(Draws(dataset), batch_size=4, num_workers=1, collate_fn=list)
+    draws = DataLoader(Draws(dataset), batch_size=4, num_workers=1, collate_fn=SceneBatch.of)
     scenes = next(iter(draws))
-    assert all(isinstance(scene, Scene) for scene in scenes)
-    rendered = default_collate([render(scene, torch.device("cpu")) for scene in scenes])
+    assert isinstance(scenes, SceneBatch) and scenes.normals.shape == (4, 64, 64, 3)
+    rendered = render_batch(scenes, torch.device("cpu"))
     plain = next(iter(DataLoader(dataset, batch_size=4)))
-    assert all(torch.equal(rendered[key], plain[key]) for key in plain)
+    assert all(torch.equal(rendered[key], plain[key]) for key in plain if key != "images")
+    assert_same_stacks(rendered["images"], plain["images"])
+
+
+def assert_same_stacks(a: torch.Tensor, b: torch.Tensor) -> None:
+    """Equal to float rounding: a few values one storage level apart at most."""
+    assert a.shape == b.shape
+    differ = (a - b).abs()
+    assert float(differ.max()) <= 1 / 255 + 1e-6 and float((differ > 1e-5).float().mean()) < 1e-4
+
+
+def tiny_neural_brdf(seed: int) -> NeuralBRDF:
+    """A made-up neural material of the MERL fits' shape (6→21→21→3), its outputs of order one."""
+    rng = np.random.default_rng(seed)
+    sizes = [(6, 21), (21, 21), (21, 3)]
+    return NeuralBRDF([(0.3 * rng.standard_normal(size).astype(np.float32),
+                        np.full(size[1], 0.1, np.float32)) for size in sizes])
+
+
+@pytest.mark.parametrize("camera", [Camera(), None], ids=["camera", "perturbation"])
+def test_a_batch_renders_each_scene_as_it_renders_alone(camera):
+    """Analytic materials of one and two lobes, a neural one, painted and plain albedo, the camera's
+    noise drawn or left to the renderer (a seed): the batch is each scene's render, stacked."""
+    dataset = LightDataset(6, **{**SCENE, "camera": camera, "seed": 4}, materials=MaterialBank(measured=1.0))
+    scenes = [dataset.draw(i) for i in range(6)]
+    scenes[1] = dataclasses.replace(scenes[1], brdf=tiny_neural_brdf(1), family="neural")
+    if camera is not None:
+        scenes[2:4] = [dataclasses.replace(s, exposure=dataclasses.replace(s.exposure, noise=7 + i))
+                       for i, s in enumerate(scenes[2:4])]
+    assert {len(s.brdf.specular) for s in scenes if s.family != "neural"} == {1, 2}
+    alone = default_collate([render(scene, torch.device("cpu")) for scene in scenes])
+    batch = render_batch(SceneBatch.of(scenes), torch.device("cpu"))
+    assert all(torch.equal(batch[key], alone[key]) for key in alone if key != "images")
+    assert_same_stacks(batch["images"], alone["images"])
+
+
+def test_noise_left_to_the_renderer_keeps_every_other_draw_of_the_camera():
+    camera, shape = Camera(), (4, 3, 32, 32)
+    drawn = expose(camera, shape, sample_generator(0, 5))
+    left = expose(camera, shape, sample_generator(0, 5), defer_noise=True)
+    assert (left.gain, left.shot, left.read) == (drawn.gain, drawn.shot, drawn.read)
+    assert isinstance(left.noise, int) and left.storage in FORMATS
+    noise = noise_on(left, torch.Size(shape), torch.device("cpu"))
+    assert torch.equal(noise, noise_on(left, torch.Size(shape), torch.device("cpu")))   # its seed's
+    assert abs(float(noise.mean())) < 0.05 and abs(float(noise.std()) - 1) < 0.05
+    images = torch.rand(shape) * 0.5
+    assert torch.equal(record(images, left), record(images, left))
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")
 def test_a_sample_rendered_on_a_gpu_is_the_cpu_sample_to_float_rounding():
-    on_cpu, on_gpu = LightDataset(6, **SCENE), LightDataset(6, **SCENE, device=torch.device("cuda"))
+    """Without the camera every draw is the CPU's: the GPU's samples are the CPU's. With it, the GPU
+    draws the noise itself: one batch is each sample rendered alone on the GPU."""
+    plain = {**SCENE, "camera": None}
+    on_cpu, on_gpu = LightDataset(6, **plain), LightDataset(6, **plain, device=torch.device("cuda"))
     for index in range(6):
         a, b = on_cpu[index], on_gpu[index]
         assert b["images"].device.type == "cuda"
         assert torch.equal(a["directions"], b["directions"].cpu())
-        # a pixel within rounding of a shadow's edge or an 8-bit level may flip: compare the stacks
-        assert (a["images"] - b["images"].cpu()).abs().mean() < 1e-3
+        assert_same_stacks(a["images"], b["images"].cpu())
+    with_camera = LightDataset(6, **SCENE, device=torch.device("cuda"))
+    scenes = [with_camera.draw(i) for i in range(6)]
+    assert all(isinstance(scene.exposure.noise, int) for scene in scenes)
     data = LightData(OmegaConf.create({"resolution": 64, "images": 6, "batch_size": 3, "max_steps": 1,
                                        "val_samples": 3, "workers": 0}), None, 11, device=torch.device("cuda"))
-    batch = data.transfer_batch_to_device(next(iter(DataLoader(Draws(on_cpu), batch_size=3, collate_fn=list))),
-                                          torch.device("cuda"), 0)
-    assert batch["images"].shape == (3, 6, 3, 64, 64)
+    batch = data.transfer_batch_to_device(SceneBatch.of(scenes), torch.device("cuda"), 0)
+    assert batch["images"].shape == (6, 6, 3, 64, 64)
     assert all(batch[key].device.type == "cuda" for key in batch)
+    alone = torch.stack([with_camera[i]["images"] for i in range(6)])
+    assert_same_stacks(batch["images"].cpu(), alone.cpu())

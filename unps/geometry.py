@@ -7,6 +7,8 @@ unit per pixel of the grid.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.ndimage import binary_dilation
@@ -212,7 +214,7 @@ def cast_shadows(depth: torch.Tensor, mask: torch.Tensor, lights: torch.Tensor, 
     rows, cols = torch.nonzero(mask, as_tuple=True)
     if not len(rows):
         return out
-    distance = torch.linspace(1, (h ** 2 + w ** 2) ** 0.5, steps, device=depth.device)   # in pixels
+    distance = march_distances(h, w, steps, depth.device)
     border = int(distance[-1]) + 2                  # off the image: a frame of −∞ around it
     surface = F.pad(torch.where(mask, depth, -torch.inf), (border,) * 4, value=-torch.inf)
     surface, width = surface.flatten(), w + 2 * border
@@ -227,11 +229,110 @@ def cast_shadows(depth: torch.Tensor, mask: torch.Tensor, lights: torch.Tensor, 
         taken = distance[distance <= reach[index].max()]
         if not len(taken):
             continue
-        part = lights[index]
-        step = torch.stack([-part[:, 1], part[:, 0]], -1) / planar[index, None]  # (row, col) per pixel
-        r = (rows[None, None] + taken[None, :, None] * step[:, 0, None, None]).round().int()
-        c = (cols[None, None] + taken[None, :, None] * step[:, 1, None, None]).round().int()
-        ray = start[None, None] + (taken * pitch)[None, :, None] * rise[index, None, None]
-        out[index[:, None], rows[None], cols[None]] = (
-            surface[(r + border) * width + c + border] > ray + 1e-3).any(1)
+        step = torch.stack([-lights[index, 1], lights[index, 0]], -1) / planar[index, None]
+        out[index[:, None], rows[None], cols[None]] = occluded(surface, width, border, rows, cols, start,
+                                                               taken, pitch, step, rise[index])
     return out
+
+
+def march_distances(h: int, w: int, steps: int, device: torch.device) -> torch.Tensor:
+    """(steps,) distances in pixels at which a shadow ray samples the depth: 1 to the diagonal."""
+    return torch.linspace(1, (h ** 2 + w ** 2) ** 0.5, steps, device=device)
+
+
+def occluded(surface: torch.Tensor, width: int, border: int, rows: torch.Tensor, cols: torch.Tensor,
+             start: torch.Tensor, taken: torch.Tensor, pitch: float, step: torch.Tensor,
+             rise: torch.Tensor, base: torch.Tensor | int = 0) -> torch.Tensor:
+    """Whether the surface stands above a ray at any of its samples: the pixel at sample distance
+    d along a light's image-plane direction (nearest pixel), against the ray's height there.
+
+    Args:
+        surface: the padded depth, flattened, −∞ off the object (several images end to end).
+        width, border: the padded image's row length and the frame added around it.
+        rows, cols: (P,) the rays' pixels; start: (P,) or (C, P) their depth.
+        taken: (T,) sample distances in pixels; pitch: one pixel in depth units.
+        step: (C, 2) (row, col) per pixel of distance toward each of C lights; rise: (C,) the
+            rays' rise per unit of distance.
+        base: 0, or (C, 1, 1) where each light's padded image starts in ``surface``.
+
+    Returns:
+        (C, P) bool.
+    """
+    r = (rows[..., None, :] + taken[None, :, None] * step[:, 0, None, None]).round().int()
+    c = (cols[..., None, :] + taken[None, :, None] * step[:, 1, None, None]).round().int()
+    ray = start[..., None, :] + (taken * pitch)[None, :, None] * rise[:, None, None]
+    return (surface[base + (r + border) * width + c + border] > ray + 1e-3).any(1)
+
+
+@dataclass(frozen=True)
+class ShadowPlan:
+    """Everything that decides a batch of shadow marches, computed on the CPU so that a GPU
+    marching them is never waited on: B depth maps under n lights each, the B·n (image, light)
+    pairs in order of reach.
+
+    Attributes:
+        depth: (B, H, W) float32; mask: (B, H, W) bool.
+        order: (B·n,) the pairs (image · n + light), shortest reach first.
+        samples: (B·n,) in that order, how many of the ray samples each pair needs.
+        step: (B·n, 2) (row, col) per pixel of distance toward each pair's light; rise: (B·n,)
+            its ray's rise per unit of distance.
+        distance: (steps,) the sample distances in pixels; border: the −∞ frame padded around
+            each image; pitch: one pixel in depth units.
+    """
+
+    depth: torch.Tensor
+    mask: torch.Tensor
+    order: torch.Tensor
+    samples: torch.Tensor
+    step: torch.Tensor
+    rise: torch.Tensor
+    distance: torch.Tensor
+    border: int
+    pitch: float
+
+
+def plan_shadows(depth: torch.Tensor, mask: torch.Tensor, lights: torch.Tensor, pitch: float,
+                 steps: int) -> ShadowPlan:
+    """The :class:`ShadowPlan` of (B, H, W) depth maps and masks under (B, n, 3) lights, all on
+    the CPU (as :func:`cast_shadows` decides it for each image: samples beyond a ray's reach
+    cannot be in shadow; an empty mask casts nothing)."""
+    h, w = depth.shape[1:]
+    n = lights.shape[1]
+    distance = march_distances(h, w, steps, torch.device("cpu"))
+    span = torch.stack([(d[m].max() - d[m].min()) if m.any() else torch.tensor(0.0)
+                        for d, m in zip(depth, mask)])
+    planar = lights[..., :2].norm(dim=-1).clamp_min(1e-6)
+    rise = lights[..., 2] / planar
+    reach = torch.where(rise > 0, span[:, None] / (pitch * rise.clamp_min(1e-12)), torch.inf).flatten()
+    reach[~mask.flatten(1).any(1).repeat_interleave(n)] = 0.0
+    order = torch.argsort(reach)
+    step = torch.stack([-lights[..., 1], lights[..., 0]], -1).flatten(0, 1) / planar.flatten()[:, None]
+    return ShadowPlan(depth, mask, order, torch.searchsorted(distance, reach[order], right=True), step,
+                      rise.flatten(), distance, int(distance[-1]) + 2, pitch)
+
+
+def march_shadows(plan: ShadowPlan, device: torch.device, budget: int = 2 ** 24) -> torch.Tensor:
+    """(B, n, H, W) bool on ``device``: :func:`cast_shadows` of each of the plan's images, all
+    marched as one queue of kernels, ``budget`` samples (pairs × steps × pixels) at a time."""
+    b, h, w = plan.depth.shape
+    pairs, border = len(plan.order), plan.border
+    to = lambda x: x.to(device, non_blocking=True)     # noqa: E731
+    depth, mask = to(plan.depth), to(plan.mask)
+    surface = F.pad(torch.where(mask, depth, -torch.inf), (border,) * 4, value=-torch.inf)
+    padded = surface.shape[1] * surface.shape[2]
+    surface, start = surface.flatten(), depth.flatten(1)
+    order, step, rise, distance = to(plan.order), to(plan.step), to(plan.rise), to(plan.distance)
+    rows, cols = (g.flatten().float() for g in torch.meshgrid(
+        torch.arange(h, device=device), torch.arange(w, device=device), indexing="ij"))
+    out = torch.zeros(pairs, h * w, dtype=torch.bool, device=device)
+    chunk = max(1, budget // (len(plan.distance) * h * w))
+    samples = plan.samples.tolist()
+    for first in range(0, pairs, chunk):
+        count = samples[min(first + chunk, pairs) - 1]       # the chunk's longest reach
+        if not count:
+            continue
+        index = order[first:first + chunk]
+        image = index // (pairs // b)
+        out[index] = occluded(surface, w + 2 * border, border, rows, cols, start[image], distance[:count],
+                              plan.pitch, step[index], rise[index], (image * padded)[:, None, None])
+    return out.view(b, pairs // b, h, w) & mask[:, None]

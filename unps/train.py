@@ -31,6 +31,7 @@ log = logging.getLogger("unps.train")
 PROGRESS = (("loss", "train/loss", "{:.3f}"), ("validation direction error", "val/direction_mae", "{:.2f}°"))
 MAY_CHANGE = ("recipe.max_steps", "recipe.max_time", "device")   # on resuming: its length, where it runs
 NOT_THE_RUN = ("ckpt_path", "paths.output_dir")          # where to resume from and write, not what
+PRECISIONS = ("32-true", "bf16-mixed")   # recipe.precision: float32, or the network in bfloat16 (a GPU)
 
 
 def override_key(override: str) -> str:
@@ -130,6 +131,9 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
                               {"paths": {"output_dir": str(out)}, "ckpt_path": str(ckpt)})
     if isinstance(cfg.seed, bool) or not isinstance(cfg.seed, int):
         raise InputError(f"seed must be a whole number, got {cfg.seed!r}")
+    precision = cfg.recipe.get("precision", "32-true")   # runs saved before the option lack it
+    if precision not in PRECISIONS:
+        raise InputError(f"recipe.precision must be one of {', '.join(PRECISIONS)}; got {precision!r}")
     L.seed_everything(cfg.seed, workers=True, verbose=False)
     torch.set_num_threads(cfg.recipe.threads or torch.get_num_threads())
     device = resolve_device(cfg.get("device", "auto"))   # runs saved before the option lack it
@@ -153,10 +157,11 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
                                    every_n_train_steps=cfg.recipe.val_every),
                    LightSamples(), LearningRateMonitor(), rate,
                    ProgressLog(shown=PROGRESS, logger=log, after_validation=True)],
-        **trainer_placement(device), log_every_n_steps=cfg.recipe.log_every,
+        **trainer_placement(device), precision=precision,
+        log_every_n_steps=cfg.recipe.log_every,
         enable_progress_bar=False, enable_model_summary=False, deterministic=False)
-    log.info("training %s on %s, %d threads: %d steps of %d samples (%d px, %d images), at most %s; "
-             "%s; run folder %s", type(net).__name__, describe(device), torch.get_num_threads(),
+    log.info("training %s on %s (%s), %d threads: %d steps of %d samples (%d px, %d images), at most %s; "
+             "%s; run folder %s", type(net).__name__, describe(device), precision, torch.get_num_threads(),
              cfg.recipe.max_steps, cfg.recipe.batch_size, cfg.recipe.resolution, cfg.recipe.images,
              cfg.recipe.max_time or "no time limit", data.workers_note(), out)
     start = time.perf_counter()

@@ -35,6 +35,9 @@ from pathlib import Path
 
 import torch
 
+from unps.device import resolve_device
+from unps.lightnet.data import LightData
+
 DILIGENT = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "DiLiGenT"
 FIT_STAGES = ("steps", "interreflection update", "cast shadows", "read-out", "robust initialisation")
 DEFAULT_STAGES = ("light network", "self-calibration", "method")
@@ -74,33 +77,117 @@ def subject_overrides(name: str, diligent: Path) -> list[str]:
     return [f"subject={name}", f"paths.diligent_dir={diligent}"]
 
 
-def data_rates(device: str, samples: int) -> tuple[float, float]:
+def data_rates(device: str, samples: int, batch: int) -> tuple[float, float, float]:
     """Samples per second of the two halves of ``recipe=paper``'s training data on this machine:
-    drawing (the CPU part, in one process; the workers share it out) and rendering the draws on
-    ``device`` one sample at a time (the first, which starts CUDA, not timed)."""
-    from hydra import compose, initialize_config_module
+    drawing as the workers draw for ``device`` (the CPU part, in one process; the ``recipe.workers``
+    processes share it out), and rendering the draws on ``device`` one sample at a time and in
+    batches of ``batch`` (the first of each, which starts CUDA, not timed)."""
+    from unps.lightnet.synthesis import SceneBatch, render, render_batch
 
-    from unps.device import resolve_device
-    from unps.lightnet.data import LightData
-    from unps.lightnet.synthesis import render
-
-    with initialize_config_module("unps.conf", version_base="1.3"):
-        cfg = compose("train", overrides=["recipe=paper"])
+    cfg = paper_config()
     where = resolve_device(device)
     data = LightData(cfg.recipe, cfg.data, cfg.seed, device=where)
     data.setup("fit")
     start = time.perf_counter()
-    scenes = [data.train_set.draw(index) for index in range(samples + 1)]
-    drawing = (samples + 1) / (time.perf_counter() - start)
-    render(scenes.pop(), where)
-    if where.type == "cuda":
-        torch.cuda.synchronize(where)
+    scenes = [data.train_set.draw(index) for index in range(samples)]
+    drawing = samples / (time.perf_counter() - start)
+    batches = [SceneBatch.of(scenes[i:i + batch]) for i in range(0, samples, batch)]
+    render_batch(batches[0], where)
+    render(scenes[0], where)
+
+    def rate(work) -> float:
+        synchronize(where)
+        start = time.perf_counter()
+        work()
+        synchronize(where)
+        return samples / (time.perf_counter() - start)
+
+    one = rate(lambda: [render(scene, where) for scene in scenes])
+    batched = rate(lambda: [render_batch(pack, where) for pack in batches])
+    return drawing, one, batched
+
+
+def loader_rate(device: str, batches: int, workers: int | None) -> float:
+    """Samples per second that ``recipe=paper``'s training loader delivers for ``device`` (its
+    ``recipe.workers`` processes drawing, or ``workers``), nothing rendered: after its first batch,
+    which starts the workers."""
+    cfg = paper_config(*([] if workers is None else [f"recipe.workers={workers}"]))
+    data = LightData(cfg.recipe, cfg.data, cfg.seed, device=resolve_device(device))
+    data.setup("fit")
+    loader = iter(data.train_dataloader())
+    next(loader)
     start = time.perf_counter()
-    for scene in scenes:
-        render(scene, where)
-    if where.type == "cuda":
-        torch.cuda.synchronize(where)
-    return drawing, samples / (time.perf_counter() - start)
+    for _ in range(batches):
+        next(loader)
+    return batches * cfg.recipe.batch_size / (time.perf_counter() - start)
+
+
+def step_rates(device: str, steps: int) -> dict[str, float]:
+    """Samples per second of the light network's training step alone (forward, loss, backward, Adam)
+    on one rendered ``recipe=paper`` batch, for each precision of ``recipe.precision``."""
+    from hydra.utils import instantiate
+
+    from unps.lightnet.synthesis import SceneBatch, render_batch
+    from unps.lightnet.system import bin_losses
+    from unps.train import PRECISIONS
+
+    cfg = paper_config()
+    where = resolve_device(device)
+    data = LightData(cfg.recipe, cfg.data, cfg.seed, device=where)
+    data.setup("fit")
+    batch = render_batch(SceneBatch.of([data.train_set.draw(i) for i in range(cfg.recipe.batch_size)]), where)
+    rates = {}
+    for precision in PRECISIONS:
+        net = instantiate(cfg.light, _partial_=True)().to(where)
+        optimiser = torch.optim.Adam(net.parameters(), lr=cfg.recipe.lr)
+
+        def step():
+            with torch.autocast(where.type, dtype=torch.bfloat16, enabled=precision == "bf16-mixed"):
+                logits = net(batch["images"], batch["mask"])
+            loss = sum(bin_losses({k: v.float() for k, v in logits.items()}, batch["directions"],
+                                  batch["intensities"]).values())
+            optimiser.zero_grad()
+            loss.backward()
+            optimiser.step()
+
+        for _ in range(3):
+            step()
+        synchronize(where)
+        start = time.perf_counter()
+        for _ in range(steps):
+            step()
+        synchronize(where)
+        rates[precision] = steps * cfg.recipe.batch_size / (time.perf_counter() - start)
+    return rates
+
+
+def profile_training(device: str, steps: int, workers: int | None, out: Path, top: int = 25) -> None:
+    """Train ``recipe=paper`` for ``steps`` steps in this process under cProfile and print where
+    the training process spends its time (its own functions, not the workers'): waiting on the
+    loader shows as the queue's ``get``, on the GPU as CUDA's synchronising calls."""
+    import cProfile
+    import pstats
+
+    from unps.train import train
+
+    overrides = [f"recipe.max_steps={steps}", f"recipe.val_every={steps}", "recipe.val_samples=64",
+                 f"device={device}", f"paths.output_dir={out}",
+                 *([] if workers is None else [f"recipe.workers={workers}"])]
+    profiler = cProfile.Profile()
+    profiler.runcall(train, paper_config(*overrides))
+    pstats.Stats(profiler).sort_stats("tottime").print_stats(top)
+
+
+def paper_config(*overrides: str):
+    from hydra import compose, initialize_config_module
+
+    with initialize_config_module("unps.conf", version_base="1.3"):
+        return compose("train", overrides=["recipe=paper", *overrides])
+
+
+def synchronize(device: torch.device) -> None:
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
 
 
 def main() -> None:
@@ -108,11 +195,15 @@ def main() -> None:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--device", default="cuda")
     parser.add_argument("--out", type=Path, default=Path("runs/gpu"))
+    parser.add_argument("--rows", nargs="+", default=list(ROWS[:-1]), choices=ROWS,
+                        help="which rows to run; 'profile' (not run by default) prints where a short "
+                             "training run's process spends its time")
     parser.add_argument("--subjects", nargs="+", default=["cat", "pot1"])
     parser.add_argument("--default-subject", default="cat", help="the subject of the default command")
     parser.add_argument("--steps", type=int, default=1000, help="steps of the paper-preset fits")
     parser.add_argument("--train-steps", type=int, default=100)
-    parser.add_argument("--render-samples", type=int, default=64)
+    parser.add_argument("--workers", type=int, default=None, help="recipe.workers of the training rows")
+    parser.add_argument("--render-samples", type=int, default=128)
     parser.add_argument("--diligent", type=Path, default=DILIGENT)
     args = parser.parse_args()
     device = [f"device={args.device}"]
@@ -121,7 +212,7 @@ def main() -> None:
     print("| row | seconds | normal MAE ° | peak GPU GB | where the time goes (s) |")
     print("|---|---|---|---|---|")
     schedule = [f"preset.steps={args.steps}", f"preset.lr_drop_at={max(1, args.steps * 9 // 10)}"]
-    for name in args.subjects:
+    for name in args.subjects if "paper" in args.rows else ():
         metrics, _ = run(args.out / f"paper-{name}", "unps.fit", *subject_overrides(name, args.diligent),
                          "preset=paper", "light=gt", *schedule, *device)
         stages = metrics["stage_seconds"]
@@ -129,26 +220,45 @@ def main() -> None:
         print(f"| paper preset, {name}, {args.steps} steps (fit) | {metrics['runtime_s']:.1f} | "
               f"{metrics.get('normal_mae', float('nan')):.2f} | {memory(metrics)} | {spent} |", flush=True)
 
-    name = args.default_subject
-    metrics, wall = run(args.out / f"default-{name}", "unps.fit", *subject_overrides(name, args.diligent),
-                        *device)
-    stages = metrics["stage_seconds"]
-    spent = ", ".join(f"{k} {stages[k]:.1f}" for k in DEFAULT_STAGES if k in stages)
-    print(f"| default command, {name} (whole command) | {wall:.1f} | "
-          f"{metrics.get('normal_mae', float('nan')):.2f} | {memory(metrics)} | {spent} |", flush=True)
+    if "default" in args.rows:
+        name = args.default_subject
+        metrics, wall = run(args.out / f"default-{name}", "unps.fit",
+                            *subject_overrides(name, args.diligent), *device)
+        stages = metrics["stage_seconds"]
+        spent = ", ".join(f"{k} {stages[k]:.1f}" for k in DEFAULT_STAGES if k in stages)
+        print(f"| default command, {name} (whole command) | {wall:.1f} | "
+              f"{metrics.get('normal_mae', float('nan')):.2f} | {memory(metrics)} | {spent} |", flush=True)
 
     steps = args.train_steps
-    metrics, _ = run(args.out / "train", "unps.train", "recipe=paper", f"recipe.max_steps={steps}",
-                     f"recipe.val_every={steps}", "recipe.val_samples=64", *device)
-    overall = metrics["steps"] * 32 / metrics["train_seconds"]
-    running = metrics.get("train_samples_per_s")
-    running = "–" if running is None else f"{running:.1f}"
-    print(f"| training, recipe=paper, {steps} steps of 32 | {metrics['train_seconds']:.1f} | – | "
-          f"{memory(metrics)} | {overall:.1f} samples/s over the run (start-up and a validation of 64 "
-          f"included), {running} once running |", flush=True)
-    drawing, rendering = data_rates(args.device, args.render_samples)
-    print(f"| training data alone: draws in one CPU process, rendering on {args.device} | – | – | – | "
-          f"{drawing:.1f} and {rendering:.1f} samples/s |", flush=True)
+    workers = [] if args.workers is None else [f"recipe.workers={args.workers}"]
+    for precision in ("32-true", "bf16-mixed") if "train" in args.rows else ():
+        metrics, _ = run(args.out / f"train-{precision}", "unps.train", "recipe=paper",
+                         f"recipe.precision={precision}", f"recipe.max_steps={steps}",
+                         f"recipe.val_every={steps}", "recipe.val_samples=64", *workers, *device)
+        overall = metrics["steps"] * 32 / metrics["train_seconds"]
+        running = metrics.get("train_samples_per_s")
+        running = "–" if running is None else f"{running:.1f}"
+        print(f"| training, recipe=paper recipe.precision={precision}, {steps} steps of 32 | "
+              f"{metrics['train_seconds']:.1f} | – | {memory(metrics)} | {overall:.1f} samples/s over the "
+              f"run (start-up and a validation of 64 included), {running} once running |", flush=True)
+
+    if "data" in args.rows:
+        drawing, one, batched = data_rates(args.device, args.render_samples, 32)
+        print(f"| training data alone: draws in one CPU process; rendering on {args.device}, one sample at "
+              f"a time and 32 at once | – | – | – | {drawing:.1f}; {one:.1f} and {batched:.1f} samples/s |",
+              flush=True)
+        workers = "recipe.workers" if args.workers is None else f"{args.workers} workers"
+        print(f"| the training loader alone ({workers}, nothing rendered) | – | – | – | "
+              f"{loader_rate(args.device, 30, args.workers):.1f} samples/s |", flush=True)
+        rates = step_rates(args.device, 20)
+        print(f"| the network's training step alone (batch 32) | – | – | – | "
+              f"{'; '.join(f'{p} {r:.1f}' for p, r in rates.items())} samples/s |", flush=True)
+
+    if "profile" in args.rows:
+        profile_training(args.device, args.train_steps, args.workers, args.out / "profile")
+
+
+ROWS = ("paper", "default", "train", "data", "profile")
 
 
 if __name__ == "__main__":

@@ -64,6 +64,7 @@ def main() -> None:
     parser.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES))
     parser.add_argument("--out", type=Path, default=Path("runs/same-outputs"))
     args = parser.parse_args()
+    args.out = args.out.resolve()              # the runs start in the old source's folder
     old = worktree(args.before, args.out)
     new = Path(__file__).resolve().parents[2]
     print(f"machine: {machine()}; before: {args.before}")

@@ -144,6 +144,7 @@ class InverseRendering(L.LightningModule):
         self.register_buffer("true_normals", None if true_normals is None else true_normals[None],
                              persistent=False)
         self.register_buffer("visible", torch.ones(images.shape[0], 1, *mask.shape), persistent=False)
+        self.register_buffer("first_bad", torch.tensor([-1.0, 0.0]), persistent=False)   # (step, loss)
         self.register_buffer("pixel_weight", residual_weight(images, self.mask, schedule.residual, albedo),
                              persistent=False)
         n = images.shape[0]
@@ -234,26 +235,42 @@ class InverseRendering(L.LightningModule):
         index = torch.randperm(n, device=self.device)[:count]
         out = self.render(index)
         keep = self.mask * (torch.rand_like(self.mask) < s.pixel_keep)
-        if keep.sum() == 0:
-            keep = self.mask
+        keep = torch.where(keep.sum() > 0, keep, self.mask)          # none kept: all (nothing waits)
         if self.usable is not None:
             keep = keep * self.usable[index]                     # (B, 1, H, W): clipped values out
         residual = (out["reconstruction"] - out["observed"]).abs() * (keep * self.pixel_weight)
         loss = residual.sum() / (keep.expand(count, 1, -1, -1).sum().clamp_min(1) * 3)
-        self.log("loss/reconstruction", loss, prog_bar=True)
+        self.log("loss/reconstruction", loss)
         if self.global_step < s.prior_steps and s.prior_weight > 0:
             prior = (((out["normals"] - self.init_normals) ** 2).sum(1, keepdim=True) * self.mask
                      ).sum() / self.mask.sum()
             loss = loss + s.prior_weight * prior
             self.log("loss/prior", prior)
-        if not torch.isfinite(loss):
-            raise Diverged(f"the loss became {loss.item()} at step {self.global_step}")
+        self.watch_divergence(loss)
         if self.true_normals is not None:
-            self.log("mae", self.normal_mae(out["normals"].detach()), prog_bar=True)
+            self.log("mae", self.normal_mae(out["normals"].detach()))
         if self.refine_lights:
             self.log("light/offset_deg", torch.rad2deg(torch.acos(
                 (self.lights()[0] * self.initial_lights).sum(1).clamp(-1, 1))).mean())
         return loss
+
+    def watch_divergence(self, loss: torch.Tensor) -> None:
+        """Note the first step whose loss is not finite, and stop the fit there before its next
+        checkpoint. Only the steps before a checkpoint and the last read the note (on a GPU,
+        reading it waits for the device; every step would keep the GPU idle between steps).
+
+        Raises:
+            Diverged: the loss was not finite at a step since the last checkpoint.
+        """
+        s = self.schedule
+        loss = loss.detach()
+        bad = ~torch.isfinite(loss) & (self.first_bad[0] < 0)
+        step = torch.full_like(loss, float(self.global_step))
+        self.first_bad = torch.where(bad, torch.stack([step, loss]), self.first_bad)
+        if (self.global_step + 1) % s.update_every == 0 or self.global_step + 1 >= s.steps:
+            first, value = self.first_bad.tolist()
+            if first >= 0:
+                raise Diverged(f"the loss became {value} at step {int(first)}")
 
     def normal_mae(self, normals: torch.Tensor) -> torch.Tensor:
         """Mean angular error (degrees) of (1, 3, H, W) normals over the mask."""

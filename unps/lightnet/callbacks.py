@@ -69,29 +69,35 @@ class LightSamples(L.Callback):
 class SampleRate(L.Callback):
     """Training samples per second once the run is under way: counted from the end of its first
     ``skip`` steps (data workers starting, the device warming up) to its last step, validations
-    left out. ``samples_per_s`` is None until a step past ``skip`` has run."""
+    left out; on a GPU the clock waits for the device at both ends. ``samples_per_s`` is None
+    until a step past ``skip`` has run."""
 
     def __init__(self, skip: int = 5):
         self.skip = skip
         self._batches = self._samples = 0
+        self._start: float | None = None
         self._active = self._paused = 0.0
-        self._last: float | None = None
         self._validation_start: float | None = None
 
     def on_train_batch_end(self, trainer, module, outputs, batch, batch_idx) -> None:
-        now = time.perf_counter()
         self._batches += 1
-        if self._batches > self.skip and self._last is not None:
-            self._active += now - self._last - self._paused
+        first = max(self.skip, 1)                 # the clock starts at the end of this batch
+        last = trainer.max_steps > 0 and trainer.global_step >= trainer.max_steps
+        if self._batches == first or (last and self._batches > first):
+            if module.device.type == "cuda":
+                torch.cuda.synchronize(module.device)
+        now = time.perf_counter()
+        if self._batches == first:
+            self._start, self._paused = now, 0.0
+        elif self._batches > first:
             self._samples += len(batch["images"])
-        if self._batches >= self.skip:
-            self._last, self._paused = now, 0.0
+            self._active = now - self._start - self._paused
 
     def on_validation_start(self, trainer, module) -> None:
         self._validation_start = time.perf_counter()
 
     def on_validation_end(self, trainer, module) -> None:
-        if self._last is not None and self._validation_start is not None:
+        if self._start is not None and self._validation_start is not None:
             self._paused += time.perf_counter() - self._validation_start
 
     @property

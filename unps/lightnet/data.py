@@ -6,12 +6,12 @@ import logging
 
 import lightning as L
 import torch
-from torch.utils.data import DataLoader, Dataset, default_collate
+from torch.utils.data import DataLoader, Dataset
 
 from unps.lightnet.materials import MaterialBank
 from unps.lightnet.rig import Camera
 from unps.lightnet.meshes import mesh_views
-from unps.lightnet.synthesis import LightDataset, Scene, render
+from unps.lightnet.synthesis import LightDataset, Scene, SceneBatch, render_batch
 
 VALIDATION_SEED_OFFSET = 1_000_003   # validation stacks never share a (seed, index) with training
 
@@ -33,8 +33,10 @@ class LightData(L.LightningDataModule):
             were seen before.
         device: where the stacks are rendered. On the CPU, whole samples come from
             ``recipe.workers`` worker processes; on a GPU the workers make only each sample's
-            random draws (:meth:`LightDataset.draw`) and the training process renders the batch
-            on the GPU as it arrives (:meth:`transfer_batch_to_device`).
+            random draws (:meth:`LightDataset.draw`, the camera noise left to the GPU), packed
+            per batch (:class:`~unps.lightnet.synthesis.SceneBatch`), and the training process
+            renders each batch there in one pass as it arrives
+            (:meth:`transfer_batch_to_device`, :func:`~unps.lightnet.synthesis.render_batch`).
     """
 
     def __init__(self, recipe, data, seed: int, start_step: int = 0,
@@ -71,14 +73,14 @@ class LightData(L.LightningDataModule):
             return DataLoader(dataset, batch_size=self.recipe.batch_size, num_workers=workers,
                               persistent_workers=workers > 0)
         return DataLoader(Draws(dataset), batch_size=self.recipe.batch_size, num_workers=workers,
-                          persistent_workers=workers > 0, collate_fn=list)
+                          persistent_workers=workers > 0, collate_fn=SceneBatch.of)
 
     def transfer_batch_to_device(self, batch, device: torch.device, dataloader_idx: int):
-        """A batch of draws (device path) rendered on ``device``; a rendered batch moved there."""
+        """A batch of draws (device path, a :class:`SceneBatch`) rendered on ``device``; a rendered
+        batch moved there."""
         if self.device.type == "cpu":
             return super().transfer_batch_to_device(batch, device, dataloader_idx)
-        rendered = default_collate([render(scene, device) for scene in batch])
-        return super().transfer_batch_to_device(rendered, device, dataloader_idx)   # ``family`` too
+        return render_batch(batch, device)
 
     def workers_note(self) -> str:
         """Where the stacks are rendered, for the log."""

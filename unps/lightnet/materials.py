@@ -5,13 +5,17 @@ Frame: x right, y up, z toward the camera; the view is (0, 0, 1).
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 import torch
 import torch.nn.functional as F
+from torch import nn
 
 from unps.errors import InputError
-from unps.lightnet.brdf import random_analytic, random_measured, read_merl_binary, read_neural_brdf
+from unps.lightnet.brdf import (AnalyticBRDF, ggx_lobe, random_analytic, random_measured, read_merl_binary,
+                                read_neural_brdf)
 from unps.lightnet.shapes import ShapeMaps, cast_shadows
 
 
@@ -27,13 +31,7 @@ def shade(maps: ShapeMaps, brdf, lights: torch.Tensor, intensities: torch.Tensor
         (n, 3, H, W) float32, on that device.
     """
     m = maps.mask
-    n = maps.normals[m]                                               # (P, 3)
-    tangent = F.normalize(torch.linalg.cross(torch.where(n[:, :1].abs() < 0.9,
-                                                         torch.tensor([1.0, 0, 0], device=n.device),
-                                                         torch.tensor([0, 1.0, 0], device=n.device)), n),
-                          dim=-1)
-    bitangent = torch.linalg.cross(n, tangent)
-    frame = torch.stack([tangent, bitangent, n], 1)                   # (P, 3, 3) rows
+    frame = local_frames(maps.normals[m])                             # (P, 3, 3) rows
     wi = torch.einsum("pij,lj->lpi", frame, lights)                   # (L, P, 3)
     wo = frame[:, :, 2][None].expand_as(wi)                           # view (0, 0, 1)
     with torch.no_grad():
@@ -46,6 +44,95 @@ def shade(maps: ShapeMaps, brdf, lights: torch.Tensor, intensities: torch.Tensor
     images = torch.zeros(len(lights), *m.shape, 3, device=m.device)
     images[:, m] = value
     return images.permute(0, 3, 1, 2)
+
+
+def local_frames(normals: torch.Tensor) -> torch.Tensor:
+    """(..., 3, 3) rows tangent, bitangent, normal of (..., 3) unit normals (zero normals: zero
+    frames)."""
+    axis = torch.where(normals[..., :1].abs() < 0.9, torch.tensor([1.0, 0, 0], device=normals.device),
+                       torch.tensor([0, 1.0, 0], device=normals.device))
+    tangent = F.normalize(torch.linalg.cross(axis, normals), dim=-1)
+    return torch.stack([tangent, torch.linalg.cross(normals, tangent), normals], -2)
+
+
+def shade_batch(normals: torch.Tensor, mask: torch.Tensor, lobes: LobeTable, others: dict[int, nn.Module],
+                lights: torch.Tensor, intensities: torch.Tensor, albedo: torch.Tensor, shadows: torch.Tensor,
+                budget: int = 2 ** 23) -> torch.Tensor:
+    """:func:`shade` of B scenes at once: analytic materials as one batch of lobes, any other
+    material scene by scene.
+
+    Args:
+        normals: (B, H, W, 3); mask: (B, H, W) bool; lights: (B, n, 3); intensities: (B, n);
+            albedo: (B, H, W, 3); shadows: (B, n, H, W) bool, True where a light is hidden; all on
+            one device.
+        lobes: the analytic materials (:meth:`LobeTable.of`), on that device.
+        others: the scenes whose material is not analytic, by index, each with its material.
+        budget: light-pixel pairs shaded at once (memory grows with it).
+
+    Returns:
+        (B, n, 3, H, W) float32, 0 off the objects: each scene as :func:`shade` renders it.
+    """
+    b, h, w, _ = normals.shape
+    n = lights.shape[1]
+    images = torch.zeros(b, n, h * w, 3, device=normals.device)
+    analytic = [i for i in range(b) if i not in others]
+    group = max(1, budget // (n * h * w))
+    for first in range(0, len(analytic), group):
+        pick = analytic[first:first + group]
+        index = torch.tensor(pick).to(normals.device, non_blocking=True)
+        frame = local_frames(normals[index].flatten(1, 2))                     # (G, P, 3, 3)
+        wi = torch.einsum("gpij,glj->glpi", frame, lights[index])              # (G, n, P, 3)
+        wo = frame[..., 2][:, None].expand_as(wi)
+        value = lobes.rows(index).values(wi, wo) * wi[..., 2:].clamp_min(0)
+        value = value * albedo[index].flatten(1, 2)[:, None] * intensities[index][:, :, None, None]
+        images[index] = torch.where(mask[index].flatten(1)[:, None, :, None], value, 0.0)
+    for i, brdf in others.items():
+        maps = ShapeMaps(normals[i], torch.zeros_like(mask[i], dtype=torch.float32), mask[i])
+        images[i] = shade(maps, brdf.to(normals.device), lights[i], intensities[i], albedo[i],
+                          shadows=False).permute(0, 2, 3, 1).flatten(1, 2)
+    images = images * (~shadows).flatten(2)[..., None]
+    return images.permute(0, 1, 3, 2).unflatten(3, (h, w))
+
+
+@dataclass(frozen=True)
+class LobeTable:
+    """G analytic materials (:class:`AnalyticBRDF`) as tensors, K lobes each (a missing lobe has
+    no albedo): diffuse (G, 3), specular (G, K, 3), roughness (G, K), fresnel0 (G, K)."""
+
+    diffuse: torch.Tensor
+    specular: torch.Tensor
+    roughness: torch.Tensor
+    fresnel0: torch.Tensor
+
+    @classmethod
+    def of(cls, brdfs: list) -> LobeTable:
+        """The table of ``brdfs``; a material that is not analytic gets a row of no light."""
+        lobed = [brdf if isinstance(brdf, AnalyticBRDF) else None for brdf in brdfs]
+        count = max([len(brdf.specular) for brdf in lobed if brdf is not None], default=1)
+        rows = lambda name, fill: torch.tensor([                          # noqa: E731
+            [float(v) for v in getattr(brdf, name)] + [fill] * (count - len(brdf.specular))
+            if brdf is not None else [fill] * count for brdf in lobed])
+        diffuse = [brdf.diffuse.cpu() if brdf is not None else torch.zeros(3) for brdf in lobed]
+        specular = [F.pad(brdf.specular.cpu(), (0, 0, 0, count - len(brdf.specular)))
+                    if brdf is not None else torch.zeros(count, 3) for brdf in lobed]
+        return cls(torch.stack(diffuse), torch.stack(specular), rows("roughness", 1.0),
+                   rows("fresnel0", 0.04))
+
+    def to(self, device: torch.device) -> LobeTable:
+        return LobeTable(*(getattr(self, f.name).to(device, non_blocking=True) for f in fields(self)))
+
+    def rows(self, index: torch.Tensor) -> LobeTable:
+        return LobeTable(*(getattr(self, f.name)[index] for f in fields(self)))
+
+    def values(self, wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
+        """(G, ..., 3) RGB f(wi, wo) of the G materials for (G, ..., 3) local directions
+        (:meth:`AnalyticBRDF.forward`, its terms in the same order)."""
+        along = (-1,) + (1,) * (wi.dim() - 2)
+        value = (self.diffuse / math.pi).view(*along, 3)
+        for k in range(self.specular.shape[1]):
+            value = value + self.specular[:, k].view(*along, 3) * ggx_lobe(
+                wi, wo, self.roughness[:, k].view(along), self.fresnel0[:, k].view(along))[..., None]
+        return value
 
 
 def painted(resolution: int, generator: torch.Generator) -> torch.Tensor:

@@ -235,7 +235,18 @@ def maps_from_depth(z: torch.Tensor, mask: torch.Tensor) -> ShapeMaps:
     return ShapeMaps(normals * mask[..., None], torch.where(mask, z, torch.zeros_like(z)), mask)
 
 
-def cast_shadows(maps: ShapeMaps, lights: torch.Tensor, steps: int = 24) -> torch.Tensor:
+SHADOW_STEPS = 24
+"""Samples along each shadow ray of the training data."""
+
+
+def cast_shadows(maps: ShapeMaps, lights: torch.Tensor, steps: int = SHADOW_STEPS) -> torch.Tensor:
     """(n, H, W) bool: which object pixels each of the (n, 3) unit ``lights`` cannot see
     (:func:`unps.geometry.cast_shadows` on the maps' depth in view units)."""
     return geometry.cast_shadows(maps.depth, maps.mask, lights, 2 / (maps.depth.shape[0] - 1), steps)
+
+
+def plan_shadows(depth: torch.Tensor, mask: torch.Tensor, lights: torch.Tensor) -> geometry.ShadowPlan:
+    """The shadow march of B shapes' (B, H, W) depth and mask under their (B, n, 3) lights, all on
+    the CPU, planned as :func:`cast_shadows` marches each (:func:`unps.geometry.plan_shadows`;
+    :func:`unps.geometry.march_shadows` runs it)."""
+    return geometry.plan_shadows(depth, mask, lights, 2 / (depth.shape[1] - 1), SHADOW_STEPS)

@@ -20,9 +20,14 @@ import torch.nn.functional as F
 from torch.utils.data import Dataset
 
 from unps.errors import InputError
-from unps.lightnet.materials import FAMILIES, MaterialBank, painted, shade
-from unps.lightnet.rig import LAYOUTS, Camera, Exposure, draw_lights, expose, record
-from unps.lightnet.shapes import SHAPES, ShapeMaps, check_weights, draw_shape, sample_generator
+from unps.geometry import ShadowPlan, march_shadows
+from unps.lightnet.brdf import AnalyticBRDF
+from unps.lightnet.materials import FAMILIES, LobeTable, MaterialBank, painted, shade, shade_batch
+from unps.lightnet.rig import LAYOUTS, Camera, Exposure, draw_lights, expose, record, record_batch
+from unps.lightnet.shapes import SHAPES, ShapeMaps, check_weights, draw_shape, plan_shadows, sample_generator
+
+LEVEL_SAMPLES = 8192
+"""About this many of a stack's object values (evenly spaced) set its 99th percentile."""
 
 
 class LightDataset(Dataset):
@@ -53,8 +58,10 @@ class LightDataset(Dataset):
         shape: force one shape family (for per-family validation).
         offset: item i is sample ``offset + i`` (a resumed run continues where it stopped).
         device: where a sample is rendered (shading, cast shadows, camera) and returned. Its
-            random draws are made on the CPU in every case, so a sample is the same function of
-            (seed, index) on any device: bit for bit on the CPU, to float rounding on a GPU.
+            random draws are made on the CPU, but for the simulated camera's noise: off the CPU,
+            the device draws it from a seed drawn in its place (:func:`~unps.lightnet.rig.expose`),
+            so a sample there is the CPU's sample to float rounding but for its noise and storage
+            format, and each a function of (seed, index).
     """
 
     def __init__(self, length: int, resolution: int = 128, images: int = 32,
@@ -122,7 +129,7 @@ class LightDataset(Dataset):
         shape = (self.images, 3, self.resolution, self.resolution)
         if self.camera is not None:
             return Scene(maps, brdf, family, lights[pick], intensities, albedo,
-                         exposure=expose(self.camera, shape, g))
+                         exposure=expose(self.camera, shape, g, defer_noise=self.device.type != "cpu"))
         return Scene(maps, brdf, family, lights[pick], intensities, albedo, saturation=self.saturation,
                      perturbation=self.perturbation * (2 * torch.rand(shape, generator=g) - 1))
 
@@ -163,7 +170,7 @@ def render(scene: Scene, device: torch.device) -> dict[str, torch.Tensor]:
     albedo = None if scene.albedo is None else scene.albedo.to(device)
     images = shade(maps, scene.brdf.to(device), lights, intensities, albedo)
     values = images[:, :, maps.mask].flatten()
-    level = torch.quantile(values[:: max(1, len(values) // 8192)], 0.99).clamp_min(1e-8)
+    level = torch.quantile(values[:: max(1, len(values) // LEVEL_SAMPLES)], 0.99).clamp_min(1e-8)
     images = images / level
     if scene.exposure is not None:
         images = record(images, scene.exposure)
@@ -175,3 +182,120 @@ def render(scene: Scene, device: torch.device) -> dict[str, torch.Tensor]:
     return {"images": images.float(), "mask": maps.mask[None].float(),
             "directions": lights.float(), "intensities": intensities.float(),
             "family": FAMILIES.index(scene.family)}
+
+
+@dataclass(frozen=True)
+class SceneBatch:
+    """B samples' draws packed into some twenty tensors, with whatever decides the work of rendering
+    them (the shadow march, the values that set each level) worked out beforehand: a worker hands
+    a batch over in one go rather than as hundreds of small tensors, each sent on its own, and the
+    training process only queues work on its device.
+
+    Attributes:
+        normals: (B, H, W, 3); lights: (B, n, 3); intensities: (B, n); albedo: (B, H, W, 3).
+        shadows: the shadow march, the (B, H, W) depth and mask within.
+        level_index, level_valid: (B, L) which values of each stack set its level
+            (:func:`level_picks`).
+        lobes: the analytic materials; others: the other materials, by sample; families: each
+            sample's material family.
+        exposures: the camera's draws (or None); saturation, perturbation: (B, n, 3, H, W) the
+            paper's noise otherwise.
+    """
+
+    normals: torch.Tensor
+    lights: torch.Tensor
+    intensities: torch.Tensor
+    albedo: torch.Tensor
+    shadows: ShadowPlan
+    level_index: torch.Tensor
+    level_valid: torch.Tensor
+    lobes: LobeTable
+    others: dict[int, torch.nn.Module]
+    families: tuple[str, ...]
+    exposures: tuple[Exposure, ...] | None
+    saturation: float | None
+    perturbation: torch.Tensor | None
+
+    @classmethod
+    def of(cls, scenes: list[Scene]) -> SceneBatch:
+        """The draws of ``scenes`` (all of one dataset), packed and planned."""
+        brdfs = [scene.brdf for scene in scenes]
+        camera = scenes[0].exposure is not None
+        size = scenes[0].maps.depth.shape
+        mask = torch.stack([scene.maps.mask for scene in scenes])
+        lights = torch.stack([scene.lights for scene in scenes])
+        return cls(torch.stack([scene.maps.normals for scene in scenes]), lights,
+                   torch.stack([scene.intensities for scene in scenes]),
+                   torch.stack([albedo_rgb(scene.albedo, size) for scene in scenes]),
+                   plan_shadows(torch.stack([scene.maps.depth for scene in scenes]), mask, lights),
+                   *level_picks(mask, lights.shape[1]),
+                   LobeTable.of(brdfs),
+                   {i: brdf for i, brdf in enumerate(brdfs) if not isinstance(brdf, AnalyticBRDF)},
+                   tuple(scene.family for scene in scenes),
+                   tuple(scene.exposure for scene in scenes) if camera else None,
+                   scenes[0].saturation,
+                   None if camera else torch.stack([scene.perturbation for scene in scenes]))
+
+
+def render_batch(batch: SceneBatch, device: torch.device) -> dict[str, torch.Tensor]:
+    """B samples rendered at once on ``device``: :func:`render` of each, stacked (to float
+    rounding), as a few hundred kernels for the whole batch, none of them waited on.
+
+    Returns:
+        ``images`` (B, n, 3, H, W), ``mask`` (B, 1, H, W), ``directions`` (B, n, 3),
+        ``intensities`` (B, n), float32, and ``family`` (B,) int64, all on ``device``.
+    """
+    to = lambda x: x.to(device, non_blocking=True)     # noqa: E731
+    mask = to(batch.shadows.mask)
+    images = shade_batch(to(batch.normals), mask, batch.lobes.to(device), batch.others, to(batch.lights),
+                         to(batch.intensities), to(batch.albedo), march_shadows(batch.shadows, device))
+    images = images / stack_levels(images, to(batch.level_index), to(batch.level_valid))
+    if batch.exposures is not None:
+        images = record_batch(images, list(batch.exposures))
+    else:
+        if batch.saturation is not None:
+            images = images.clamp(max=batch.saturation)
+        images = images + to(batch.perturbation)
+    mask = mask[:, None]
+    return {"images": images * mask[:, None], "mask": mask.float(), "directions": to(batch.lights.float()),
+            "intensities": to(batch.intensities.float()),
+            "family": to(torch.tensor([FAMILIES.index(family) for family in batch.families]))}
+
+
+def albedo_rgb(albedo: torch.Tensor | None, size: torch.Size) -> torch.Tensor:
+    """A scene's albedo multiplier as (H, W, 3): ones where it has none."""
+    if albedo is None:
+        return torch.ones(*size, 3)
+    return albedo[..., None].expand(*size, 3) if albedo.dim() == 2 else albedo
+
+
+def level_picks(mask: torch.Tensor, images: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Which values set each stack's level in :func:`render`: every k-th of its object values in
+    (image, channel, pixel) order, k chosen for about :data:`LEVEL_SAMPLES` of them.
+
+    Args:
+        mask: (B, H, W) bool; images: n, the images per stack.
+
+    Returns:
+        (B, L) int64 flat indices into each (n, 3, H, W) stack, and (B, L) bool, which of them
+        count (stacks with fewer picks are padded).
+    """
+    pixels = mask.flatten(1)
+    picks = []
+    for inside in pixels:
+        where = torch.nonzero(inside).flatten()
+        total = images * 3 * len(where)
+        taken = torch.arange(0, total, max(1, total // LEVEL_SAMPLES))
+        picks.append(taken // len(where) * pixels.shape[1] + where[taken % len(where)] if len(where)
+                     else taken)
+    longest = max(len(pick) for pick in picks)
+    return (torch.stack([F.pad(pick, (0, longest - len(pick))) for pick in picks]),
+            torch.stack([torch.arange(longest) < len(pick) for pick in picks]))
+
+
+def stack_levels(images: torch.Tensor, index: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    """(B, 1, 1, 1, 1) each stack's 99th percentile, as :func:`render` takes it, of the (B, n, 3,
+    H, W) ``images`` at the :func:`level_picks` (on their device); 1 for an empty stack."""
+    values = torch.where(valid, images.flatten(1).gather(1, index), torch.nan)
+    level = torch.nanquantile(values, 0.99, dim=1).nan_to_num(1.0).clamp_min(1e-8)
+    return level.view(-1, 1, 1, 1, 1)

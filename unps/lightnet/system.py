@@ -36,6 +36,15 @@ def batch_light_errors(directions: torch.Tensor, intensities: torch.Tensor, true
     return mae, error
 
 
+def bin_losses(logits: dict[str, torch.Tensor], directions: torch.Tensor,
+               intensities: torch.Tensor) -> dict[str, torch.Tensor]:
+    """Cross-entropy of the network's ``azimuth``, ``elevation`` and ``intensity`` logits (B, n, bins)
+    against the bins of the true (B, n, 3) directions and (B, n) intensities."""
+    targets = encode_lights(directions, intensities)
+    return {name: F.cross_entropy(logits[name].flatten(0, 1), target.flatten())
+            for name, target in zip(("azimuth", "elevation", "intensity"), targets)}
+
+
 class LightEstimation(L.LightningModule):
     """Cross-entropy on azimuth, elevation and intensity bins; Adam.
 
@@ -58,17 +67,14 @@ class LightEstimation(L.LightningModule):
         return self.net(images, mask)
 
     def _step(self, batch, stage: str):
-        logits = self.net(batch["images"], batch["mask"])
-        targets = encode_lights(batch["directions"], batch["intensities"])
-        losses = {name: F.cross_entropy(logits[name].flatten(0, 1), target.flatten())
-                  for name, target in zip(("azimuth", "elevation", "intensity"), targets)}
+        logits = {k: v.float() for k, v in self.net(batch["images"], batch["mask"]).items()}   # bf16-mixed
+        losses = bin_losses(logits, batch["directions"], batch["intensities"])
         loss = sum(losses.values())
         directions, intensities = decode_lights(logits["azimuth"], logits["elevation"],
                                                 logits["intensity"], self.soft_decode)
         mae, int_err = batch_light_errors(directions, intensities, batch["directions"],
                                     batch["intensities"])
-        log = dict(batch_size=len(mae), prog_bar=True, on_step=stage == "train",
-                   on_epoch=stage != "train")
+        log = dict(batch_size=len(mae), on_step=stage == "train", on_epoch=stage != "train")
         self.log(f"{stage}/loss", loss, **log)
         self.log(f"{stage}/direction_mae", mae.mean(), **log)
         self.log(f"{stage}/intensity_error", int_err.mean(), **log)
