@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
+from hydra import compose, initialize_config_module
 from omegaconf import OmegaConf
 from torch.utils.data import DataLoader, default_collate
 
@@ -237,6 +238,21 @@ def test_samples_drawn_in_a_worker_and_rendered_as_a_batch_are_the_samples():
     plain = next(iter(DataLoader(dataset, batch_size=4)))
     assert all(torch.equal(rendered[key], plain[key]) for key in plain if key != "images")
     assert_same_stacks(rendered["images"], plain["images"])
+
+
+def test_the_gpu_route_of_the_training_loader_taken_on_the_cpu():
+    """A data module told its stacks are rendered on a GPU: its loader hands over packed draws with
+    the camera noise left to a seed, and its transfer hook renders them where it is asked."""
+    with initialize_config_module(config_module="unps.conf", version_base="1.3"):
+        cfg = compose("train", overrides=["recipe.resolution=32", "recipe.images=4", "recipe.batch_size=3",
+                                          "recipe.workers=1"])
+    data = LightData(cfg.recipe, cfg.data, cfg.seed, device=torch.device("cuda"))   # a name only
+    data.setup("fit")
+    draws = next(iter(data.train_dataloader()))
+    assert isinstance(draws, SceneBatch) and all(isinstance(e.noise, int) for e in draws.exposures)
+    batch = data.transfer_batch_to_device(draws, torch.device("cpu"), 0)
+    assert batch["images"].shape == (3, 4, 3, 32, 32) and batch["family"].shape == (3,)
+    assert torch.isfinite(batch["images"]).all() and batch["images"].max() <= 1 + 0.5 / 255   # floor8 reads k + ½
 
 
 def assert_same_stacks(a: torch.Tensor, b: torch.Tensor) -> None:
