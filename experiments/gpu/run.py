@@ -84,10 +84,8 @@ def data_rates(device: str, samples: int, batch: int) -> tuple[float, float, flo
     batches of ``batch`` (the first of each, which starts CUDA, not timed)."""
     from unps.lightnet.synthesis import SceneBatch, render, render_batch
 
-    cfg = paper_config()
-    where = resolve_device(device)
-    data = LightData(cfg.recipe, cfg.data, cfg.seed, device=where)
-    data.setup("fit")
+    cfg, data = paper_data(device)
+    where = data.device
     start = time.perf_counter()
     scenes = [data.train_set.draw(index) for index in range(samples)]
     drawing = samples / (time.perf_counter() - start)
@@ -111,9 +109,7 @@ def loader_rate(device: str, batches: int, workers: int | None) -> float:
     """Samples per second that ``recipe=paper``'s training loader delivers for ``device`` (its
     ``recipe.workers`` processes drawing, or ``workers``), nothing rendered: after its first batch,
     which starts the workers."""
-    cfg = paper_config(*([] if workers is None else [f"recipe.workers={workers}"]))
-    data = LightData(cfg.recipe, cfg.data, cfg.seed, device=resolve_device(device))
-    data.setup("fit")
+    cfg, data = paper_data(device, *([] if workers is None else [f"recipe.workers={workers}"]))
     loader = iter(data.train_dataloader())
     next(loader)
     start = time.perf_counter()
@@ -131,10 +127,8 @@ def step_rates(device: str, steps: int) -> dict[str, float]:
     from unps.lightnet.system import bin_losses
     from unps.train import PRECISIONS
 
-    cfg = paper_config()
-    where = resolve_device(device)
-    data = LightData(cfg.recipe, cfg.data, cfg.seed, device=where)
-    data.setup("fit")
+    cfg, data = paper_data(device)
+    where = data.device
     batch = render_batch(SceneBatch.of([data.train_set.draw(i) for i in range(cfg.recipe.batch_size)]), where)
     rates = {}
     for precision in PRECISIONS:
@@ -176,6 +170,14 @@ def profile_training(device: str, steps: int, workers: int | None, out: Path, to
     profiler = cProfile.Profile()
     profiler.runcall(train, paper_config(*overrides))
     pstats.Stats(profiler).sort_stats("tottime").print_stats(top)
+
+
+def paper_data(device: str, *overrides: str) -> tuple:
+    """``recipe=paper``'s config (with ``overrides``) and its training data for ``device``, set up."""
+    cfg = paper_config(*overrides)
+    data = LightData(cfg.recipe, cfg.data, cfg.seed, device=resolve_device(device))
+    data.setup("fit")
+    return cfg, data
 
 
 def paper_config(*overrides: str):

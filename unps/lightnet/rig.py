@@ -152,20 +152,8 @@ def expose(camera: Camera, shape: tuple[int, ...], generator: torch.Generator,
 
 
 def record(images: torch.Tensor, exposure: Exposure) -> torch.Tensor:
-    """A stack scaled to a 99th percentile of 1, as the camera stores it.
-
-    Args:
-        images: (n, 3, H, W) radiance, 99th percentile of the object's values 1, on any device.
-        exposure: the camera's draws for this stack (:func:`expose`); its noise is moved to the
-            images' device.
-
-    Returns:
-        (n, 3, H, W) in [0, 1]: exposed, noisy, clipped at full scale and quantised.
-    """
-    values = images * exposure.gain
-    sigma = torch.sqrt(exposure.shot * values.clamp_min(0) + exposure.read ** 2)
-    values = (values + sigma * noise_on(exposure, images.shape, values.device)).clamp(0, 1)
-    return quantize(values, exposure.storage)
+    """One (n, 3, H, W) stack as the camera stores it (:func:`record_batch` of one)."""
+    return record_batch(images[None], [exposure])[0]
 
 
 def noise_on(exposure: Exposure, shape: torch.Size, device: torch.device) -> torch.Tensor:
@@ -179,14 +167,16 @@ def noise_on(exposure: Exposure, shape: torch.Size, device: torch.device) -> tor
 
 
 def record_batch(images: torch.Tensor, exposures: list[Exposure]) -> torch.Tensor:
-    """:func:`record` of B stacks at once.
+    """Stacks scaled to a 99th percentile of 1, as the camera stores them.
 
     Args:
-        images: (B, n, 3, H, W), each stack's 99th percentile 1, on any device.
-        exposures: B camera draws.
+        images: (B, n, 3, H, W) radiance, each stack's 99th percentile of the object's values 1,
+            on any device.
+        exposures: the camera's draws for each stack (:func:`expose`); their noise is moved to, or
+            drawn on, the images' device (:func:`noise_on`).
 
     Returns:
-        (B, n, 3, H, W): each stack as :func:`record` stores it.
+        (B, n, 3, H, W) in [0, 1]: exposed, noisy, clipped at full scale and quantised.
     """
     device, shape = images.device, images.shape[1:]
     per_stack = lambda values: torch.tensor(values, dtype=torch.float32).to(   # noqa: E731
