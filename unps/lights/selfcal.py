@@ -31,6 +31,7 @@ from typing import ClassVar
 import numpy as np
 import torch
 
+from unps.data.checks import black_everywhere
 from unps.data.lights import Verdict
 from unps.data.subject import Subject
 from unps.device import resolve_device
@@ -76,6 +77,8 @@ class SelfCalibration:
     max_pixels: int = 4000
     levels: int = 4
     sharpness: tuple[float, ...] = (10.0, 30.0, 100.0, 300.0)
+    skip_black: bool = False
+    gloss_map: bool = False
     lr: float = 0.01
     lr_lights: float = 0.003
     residual_weight: float = 0.1
@@ -131,13 +134,17 @@ def self_calibrate(subject: Subject, lights: Lights,
     model = initial_model(grid, target, first_guess, settings).to(device)
     prior = network_prior(lights, settings.prior_weight, settings.prior_floor_deg,
                           settings.prior_intensity)
-    loss, pull = fit(model, target.to(device), settings, None if prior is None else prior.to(device))
+    weight = lit_share(subject, settings.max_pixels) if settings.skip_black else None
+    loss, pull = fit(model, target.to(device), settings, None if prior is None else prior.to(device),
+                     None if weight is None else weight.to(device))
     directions, scales = (t.detach().cpu().numpy().astype(np.float64) for t in model.lights())
     if not (np.isfinite(loss) and np.all(np.isfinite(directions))):
         log.warning("self-calibration of %s diverged; keeping the first guess", subject.name)
         return lights, Verdict(settings.name, "declined", "the fit diverged", {"loss": loss})
     moved = float(angular_error(directions, lights.directions).mean())
     evidence = {"loss": loss, "prior": pull, "moved_deg": moved}
+    if weight is not None:
+        evidence["black_share"] = float(1 - weight.mean())
     log.info("self-calibrated %d lights on %d pixels in %.1f s: loss %.4g, pull toward the first "
              "guess %.4g; directions moved %.2f° on average", subject.n_images,
              int(grid.mask.sum()), time.perf_counter() - start, loss, pull, moved)
@@ -168,6 +175,18 @@ def working_grid(observed: Subject, scaled_normals: np.ndarray, max_pixels: int)
     return grid
 
 
+def lit_share(subject: Subject, max_pixels: int) -> torch.Tensor | None:
+    """(m,) the share of each object pixel of the working grid (:func:`working_grid`) whose
+    pixels are not black in every image, or None when no pixel of the subject is."""
+    black = black_everywhere(subject.images, subject.mask)
+    if not black.any():
+        return None
+    lit = np.repeat((~black).astype(np.float32)[None, ..., None], 3, -1)
+    grid = working_grid(subject.select([0]).replace(images=lit),
+                        np.zeros((int(subject.mask.sum()), 3)), max_pixels)
+    return torch.as_tensor(grid.images[0][grid.mask][:, 0])
+
+
 def initial_model(grid: Subject, target: torch.Tensor, scaled_lights: np.ndarray,
                   settings: SelfCalibration) -> SelfCalibrationModel:
     """The model at its start: depth integrated from the grid's normals, a uniform mid-grey
@@ -187,23 +206,27 @@ def initial_model(grid: Subject, target: torch.Tensor, scaled_lights: np.ndarray
     lights = torch.as_tensor(scaled_lights).float()
     uniform = torch.full((target.shape[0], 3), START_ALBEDO)
     return SelfCalibrationModel(lights, torch.as_tensor(depth), torch.as_tensor(grid.mask),
-                                uniform, tuple(settings.sharpness), settings.levels)
+                                uniform, tuple(settings.sharpness), settings.levels, settings.gloss_map)
 
 
 def objective(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibration,
-              visible: torch.Tensor | None = None) -> torch.Tensor:
-    """Mean absolute image error (cast shadows where ``visible`` (m, n) is 0) plus the pulls on
-    the per-light residuals and the bas-relief."""
+              visible: torch.Tensor | None = None, weight: torch.Tensor | None = None) -> torch.Tensor:
+    """Mean absolute image error (cast shadows where ``visible`` (m, n) is 0; each pixel weighted
+    by ``weight`` (m,) where given) plus the pulls on the per-light residuals and the bas-relief."""
     mu, nu, lam = model.gbr
-    return ((model(visible) - target).abs().mean()
+    error = (model(visible) - target).abs()
+    if weight is not None:
+        error = error * (weight / weight.mean())[:, None, None]
+    return (error.mean()
             + settings.residual_weight * model.light_residual.pow(2).sum(1).mean()
             + settings.gbr_weight * (mu ** 2 + nu ** 2 + (lam - 1) ** 2))
 
 
 def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibration,
-        prior: NetworkPrior | None = None) -> tuple[float, float]:
+        prior: NetworkPrior | None = None, weight: torch.Tensor | None = None) -> tuple[float, float]:
     """Adam on every unknown of the model for ``settings.steps`` steps, the cast shadows marched
-    again every ``settings.shadows_every`` steps; stops early on a non-finite loss.
+    again every ``settings.shadows_every`` steps, the pixels weighted by ``weight`` (m,) where
+    given; stops early on a non-finite loss.
 
     Returns:
         The objective and the prior's pull at the end, with the shadows of the final depth and
@@ -212,13 +235,15 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
     every = settings.shadows_every
     visible = None
     surface_parameters = [model.log_albedo, model.lobe_logits, *model.depth.parameters()]
+    if model.log_gloss.requires_grad:
+        surface_parameters.append(model.log_gloss)
     optimiser = torch.optim.Adam([
         dict(params=surface_parameters, lr=settings.lr),
         dict(params=[model.columns, model.gbr, model.light_residual], lr=settings.lr_lights)])
 
     def total(visible: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
         pull = prior.cost(*model.lights()) if prior is not None else torch.zeros((), device=target.device)
-        return objective(model, target, settings, visible) + pull, pull
+        return objective(model, target, settings, visible, weight) + pull, pull
 
     for step in range(settings.steps):
         if every and step % every == 0:
