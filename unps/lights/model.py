@@ -2,15 +2,14 @@
 
 Every pixel p of the working grid under image i is rendered as
 
-    X̃_ip = V_ip · e_i · max(n_p·l_i, 0) · (ρ_p + g_p · Σ_k w_k · exp(κ_k (n_p·h_i − 1)))
+    X̃_ip = V_ip · e_i · max(n_p·l_i, 0) · (ρ_p + Σ_k w_k · exp(κ_k (n_p·h_i − 1)))
 
 with V_ip 0 where the depth map casts a shadow on p from light i and 1 elsewhere
 (:meth:`SelfCalibrationModel.visibility`), n_p the normal of a depth map (so the normals are
 integrable), ρ_p an RGB diffuse albedo,
 w_k ≥ 0 the weights of K spherical-Gaussian specular lobes of fixed sharpness κ_k shared by the
-whole object, g_p > 0 a per-pixel scale on them (1 everywhere unless the gloss map is fitted:
-an object of several materials), h_i the half vector between l_i and the view v = (0, 0, 1)
-(orthographic), and (l_i, e_i) the direction and intensity of light i.
+whole object, h_i the half vector between l_i and the view v = (0, 0, 1) (orthographic), and
+(l_i, e_i) the direction and intensity of light i.
 
 The lights are parameterised around a first guess s̃_i (the light network's directions; the
 images are divided by its intensities): s_i = (s̃_i + ε_i)·A, l_i = s_i / |s_i|, e_i = |s_i|
@@ -101,12 +100,10 @@ class SelfCalibrationModel(nn.Module):
         depth: (H, W) starting depth; mask: (H, W) bool with m object pixels.
         albedo: (m, 3) starting RGB albedo (> 0).
         sharpness: the lobes' κ_k.
-        gloss_map: fit g_p, the per-pixel scale on the lobes (else g_p = 1).
     """
 
     def __init__(self, scaled_lights: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor,
-                 albedo: torch.Tensor, sharpness: tuple[float, ...], levels: int = 4,
-                 gloss_map: bool = False):
+                 albedo: torch.Tensor, sharpness: tuple[float, ...], levels: int = 4):
         super().__init__()
         self.register_buffer("scaled_lights", scaled_lights.float())
         self.register_buffer("mask", mask)
@@ -118,7 +115,6 @@ class SelfCalibrationModel(nn.Module):
         self.light_residual = nn.Parameter(torch.zeros_like(self.scaled_lights))
         self.log_albedo = nn.Parameter(albedo.clamp_min(1e-6).log())
         self.lobe_logits = nn.Parameter(torch.full((len(sharpness),), -5.0))
-        self.log_gloss = nn.Parameter(torch.zeros(len(albedo)), requires_grad=gloss_map)
 
     def frame(self) -> torch.Tensor:
         """(3, 3) A = [c_x | c_y | μ c_x + ν c_y + λ e_z], scaled to determinant ±1."""
@@ -141,10 +137,6 @@ class SelfCalibrationModel(nn.Module):
         """(K,) the lobes' weights w_k ≥ 0."""
         return F.softplus(self.lobe_logits)
 
-    def gloss(self) -> torch.Tensor:
-        """(m,) g_p, the per-pixel scale on the lobes."""
-        return self.log_gloss.exp()
-
     @torch.no_grad()
     def visibility(self) -> torch.Tensor:
         """(m, n) V: 0 where the current depth hides pixel p from the current light i (marched
@@ -163,7 +155,7 @@ class SelfCalibrationModel(nn.Module):
         halfway = F.normalize(directions + self.view, dim=-1)
         cosine = (normals @ halfway.T).clamp(max=1)
         exponent = (self.sharpness[:, None, None] * (cosine - 1)).clamp_min(MIN_EXPONENT)
-        specular = torch.einsum("k,kmn->mn", self.lobes(), torch.exp(exponent)) * self.gloss()[:, None]
+        specular = torch.einsum("k,kmn->mn", self.lobes(), torch.exp(exponent))
         radiance = self.log_albedo.exp()[:, None, :] + specular[..., None]
         if visible is not None:
             shading = shading * visible

@@ -59,6 +59,11 @@ class SelfCalibration:
         max_pixels: object pixels on the working grid at most (blocks are averaged).
         levels: scales of the depth pyramid.
         sharpness: the specular lobes' κ (spherical Gaussians on n·h).
+        skip_black: leave out of the loss the pixels black in every image
+            (:func:`unps.data.checks.black_everywhere`: they hold no shading, so any light and
+            normal explain them); the depth still runs across them and casts their shadows.
+            Off: on the light benchmark it helped 8-bit objects with dark materials by up to
+            0.7° and cost a nearly flat one 2.3° (``experiments/light_benchmark/README.md``).
         lr: learning rate of depth, albedo and lobes.
         lr_lights: learning rate of the light frame and per-light residuals.
         residual_weight: weight of the mean squared per-light residual |ε_i|².
@@ -78,7 +83,6 @@ class SelfCalibration:
     levels: int = 4
     sharpness: tuple[float, ...] = (10.0, 30.0, 100.0, 300.0)
     skip_black: bool = False
-    gloss_map: bool = False
     lr: float = 0.01
     lr_lights: float = 0.003
     residual_weight: float = 0.1
@@ -206,7 +210,7 @@ def initial_model(grid: Subject, target: torch.Tensor, scaled_lights: np.ndarray
     lights = torch.as_tensor(scaled_lights).float()
     uniform = torch.full((target.shape[0], 3), START_ALBEDO)
     return SelfCalibrationModel(lights, torch.as_tensor(depth), torch.as_tensor(grid.mask),
-                                uniform, tuple(settings.sharpness), settings.levels, settings.gloss_map)
+                                uniform, tuple(settings.sharpness), settings.levels)
 
 
 def objective(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibration,
@@ -235,8 +239,6 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
     every = settings.shadows_every
     visible = None
     surface_parameters = [model.log_albedo, model.lobe_logits, *model.depth.parameters()]
-    if model.log_gloss.requires_grad:
-        surface_parameters.append(model.log_gloss)
     optimiser = torch.optim.Adam([
         dict(params=surface_parameters, lr=settings.lr),
         dict(params=[model.columns, model.gbr, model.light_residual], lr=settings.lr_lights)])
