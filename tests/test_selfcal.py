@@ -140,8 +140,11 @@ def test_pixels_black_in_every_image_weigh_nothing_in_the_loss():
     torch.testing.assert_close(objective(model, target, settings, None, weight),
                                objective(model, changed, settings, None, weight))
     assert objective(model, target, settings) != objective(model, changed, settings)
-    found, verdict = self_calibrate(sphere, rotated(sphere, 5), settings)
+    _, verdict = self_calibrate(sphere, rotated(sphere, 5), settings)
     assert verdict.evidence["black_share"] == pytest.approx(1 - weight.mean().item())
+    dim = sphere.replace(images=np.minimum(sphere.images, 1 / 255))        # nothing above one level
+    with pytest.raises(InputError, match="every object pixel is black"):
+        lit_share(dim, settings.max_pixels)
 
 
 def test_self_calibration_is_deterministic(glossy):

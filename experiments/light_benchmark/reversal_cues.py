@@ -1,7 +1,7 @@
 """Which cue tells a reading inside out? The cast shadows the reversal test reads, against two it
 does not: the occluding contour and the light found in attached shadows.
 
-    python experiments/light_benchmark/reversal_cues.py                 # every case, ~5 min on 2 cores
+    python experiments/light_benchmark/reversal_cues.py                 # every case, ~30 min on 2 cores
     python experiments/light_benchmark/reversal_cues.py --only diligent
 
 Per case, the network's lights (``light.stages=[]``) and the robust initialisation's normals

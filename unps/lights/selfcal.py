@@ -181,10 +181,17 @@ def working_grid(observed: Subject, scaled_normals: np.ndarray, max_pixels: int)
 
 def lit_share(subject: Subject, max_pixels: int) -> torch.Tensor | None:
     """(m,) the share of each object pixel of the working grid (:func:`working_grid`) whose
-    pixels are not black in every image, or None when no pixel of the subject is."""
+    pixels are not black in every image, or None when no pixel of the subject is.
+
+    Raises:
+        InputError: every object pixel is black in every image.
+    """
     black = black_everywhere(subject.images, subject.mask)
     if not black.any():
         return None
+    if black[subject.mask].all():
+        raise InputError(f"self-calibration of {subject.name!r} with light.selfcal.skip_black=true: "
+                         f"every object pixel is black in every image, so no pixel is left to fit")
     lit = np.repeat((~black).astype(np.float32)[None, ..., None], 3, -1)
     grid = working_grid(subject.select([0]).replace(images=lit),
                         np.zeros((int(subject.mask.sum()), 3)), max_pixels)
