@@ -88,7 +88,7 @@ def summarise(result: dict) -> dict:
     arrays = {k: np.asarray(result[k], np.float64)
               for k in ("truth", "network", "reversal", "full", "halves")}
     error = {k: float(angular_error(arrays[k], arrays["truth"]).mean()) for k in
-             ("network", "reversal", "full", "halves")}
+             ("network", "reversal", "full")}
     return {**error, "moved": float(angular_error(arrays["full"], arrays["reversal"]).mean()),
             "agreement": agreement(arrays["reversal"], arrays["full"], arrays["halves"])}
 
