@@ -19,8 +19,8 @@ from unps.lightnet.brdf import NeuralBRDF
 from unps.lightnet.materials import MaterialBank
 from unps.lightnet.rig import FORMATS, LAYOUTS, Camera, draw_lights, expose, noise_on, quantize, record
 from unps.lightnet.shapes import SHAPES, sample_generator
-from unps.lightnet.data import Draws, LightData
-from unps.lightnet.synthesis import LightDataset, SceneBatch, render, render_batch
+from unps.lightnet.data import Draws, LightData, loader_workers
+from unps.lightnet.synthesis import LightDataset, SceneBatch, map_tensors, render, render_batch
 
 
 def concave_share(depth: torch.Tensor, mask: torch.Tensor) -> float:
@@ -255,6 +255,31 @@ def test_the_gpu_route_of_the_training_loader_taken_on_the_cpu():
     assert torch.isfinite(batch["images"]).all() and batch["images"].max() <= 1 + 0.5 / 255   # floor8 reads k + ½
 
 
+def test_pinning_a_batch_reaches_every_tensor_in_it_and_keeps_the_rest():
+    """SceneBatch.pin_memory maps each tensor, in the batch and in its shadow plan and lobe table
+    (the loader's pin-memory thread calls it); taken here with a copy in place of pinning, which
+    needs a GPU."""
+    dataset = LightDataset(3, **SCENE)
+    batch = SceneBatch.of([dataset.draw(i) for i in range(3)])
+    copied = map_tensors(batch, torch.clone)
+    pairs = [(getattr(batch, f.name), getattr(copied, f.name)) for f in dataclasses.fields(batch)]
+    pairs += [(getattr(part(batch), f.name), getattr(part(copied), f.name))
+              for part in (lambda b: b.shadows, lambda b: b.lobes) for f in dataclasses.fields(part(batch))]
+    tensors = [(a, b) for a, b in pairs if isinstance(a, torch.Tensor)]
+    assert len(tensors) >= 15
+    assert all(a is not b and torch.equal(a, b) for a, b in tensors)
+    kept = [(a, b) for a, b in pairs if not isinstance(a, (torch.Tensor, tuple)) and not dataclasses.is_dataclass(a)]
+    assert kept and all(a is b for a, b in kept)
+    assert_same_stacks(render_batch(copied, torch.device("cpu"))["images"],
+                       render_batch(batch, torch.device("cpu"))["images"])
+
+
+def test_loader_workers_default_to_every_cpu_but_two_and_refuse_a_negative_count():
+    assert (loader_workers(None, 16), loader_workers(None, 1), loader_workers(0, 16)) == (14, 0, 0)
+    with pytest.raises(InputError, match="recipe.workers must be a whole number"):
+        loader_workers(-1, 16)
+
+
 def assert_same_stacks(a: torch.Tensor, b: torch.Tensor) -> None:
     """Equal to float rounding: a few values one storage level apart at most."""
     assert a.shape == b.shape
@@ -321,3 +346,7 @@ def test_a_sample_rendered_on_a_gpu_is_the_cpu_sample_to_float_rounding():
     assert all(batch[key].device.type == "cuda" for key in batch)
     alone = torch.stack([with_camera[i]["images"] for i in range(6)])
     assert_same_stacks(batch["images"].cpu(), alone.cpu())
+    pinned = SceneBatch.of(scenes).pin_memory()
+    assert pinned.normals.is_pinned() and pinned.shadows.depth.is_pinned() and pinned.lobes.diffuse.is_pinned()
+    again = render_batch(pinned, torch.device("cuda"))
+    assert all(torch.equal(again[key], batch[key]) for key in batch)

@@ -10,12 +10,16 @@ Rows, each a fresh process (``python -m unps.fit`` / ``python -m unps.train``) i
   its stages (steps, interreflection update, cast shadows, read-out), the normal MAE, peak GPU memory;
 - ``default-<subject>``: the default uncalibrated command (``light=selfcal preset=fast``): wall
   seconds of the whole command, and its stages (light network, self-calibration, fit);
-- ``train``: ``python -m unps.train recipe=paper`` for ``--train-steps`` steps, the training data
-  rendered on the device: samples per second over the run (start-up and a small validation
-  included) and once running (after its first steps, validations left out), and peak GPU
-  memory; and the training data's two halves alone: its random draws (CPU, one process; the
-  ``recipe.workers`` processes share them out) and their rendering on the device, one sample at
-  a time.
+- ``train``: ``python -m unps.train recipe=paper`` for ``--train-steps`` steps (``--precisions``,
+  ``--workers``, ``--threads`` set its recipe), the training data rendered on the device: samples
+  per second over the run (start-up and a small validation included) and once running (after its
+  first steps, validations left out), and peak GPU memory;
+- ``data``: the training data's parts alone: the random draws (CPU, one process; the
+  ``recipe.workers`` processes share them out), their rendering on the device one sample at a time
+  and a batch at once, the loader with its workers, the network's training step;
+- ``loop`` (not run by default): the training loop by hand, per step: waiting on the loader,
+  rendering, the network's step; on a GPU with the loader's batches pinned and not;
+- ``profile`` (not run by default): a short training run under cProfile, in this process.
 
 Subjects are ``subject=`` names (DiLiGenT objects read from ``--diligent``, the folder holding
 ``pmsData/`` or ``pmsData_crop/``). A rerun skips rows whose
@@ -34,6 +38,7 @@ import time
 from pathlib import Path
 
 import torch
+from torch.utils.data import DataLoader
 
 from unps.device import resolve_device
 from unps.lightnet.data import LightData
@@ -155,6 +160,62 @@ def step_rates(device: str, steps: int) -> dict[str, float]:
     return rates
 
 
+def loop_breakdown(device: str, steps: int, workers: int | None, threads: int,
+                   pinned: bool = True) -> dict[str, float]:
+    """``recipe=paper``'s training loop by hand (no Lightning), the training process on ``threads``
+    CPU threads, its loader pinning each batch (``pinned``, as training does on a GPU) or not:
+    per step, ms waiting on the loader, rendering the batch and the network's step
+    (forward, loss, backward, Adam), each waited for on the device, over the last half of
+    ``steps`` (the batches the workers had ready at the start used up); then samples/s of
+    ``steps`` more steps of the same loop, nothing waited for."""
+    from hydra.utils import instantiate
+
+    from unps.lightnet.synthesis import render_batch
+    from unps.lightnet.system import bin_losses
+
+    torch.set_num_threads(threads)
+    cfg, data = paper_data(device, *([] if workers is None else [f"recipe.workers={workers}"]))
+    where = data.device
+    net = instantiate(cfg.light, _partial_=True)().to(where)
+    optimiser = torch.optim.Adam(net.parameters(), lr=cfg.recipe.lr)
+
+    def step(batch):
+        logits = net(batch["images"], batch["mask"])
+        loss = sum(bin_losses(logits, batch["directions"], batch["intensities"]).values())
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+
+    def to_device(packed):   # on the CPU the workers render whole samples
+        return packed if where.type == "cpu" else render_batch(packed, where)
+
+    loader = data.train_dataloader()
+    if not pinned:
+        loader = DataLoader(loader.dataset, batch_size=loader.batch_size, num_workers=loader.num_workers,
+                            persistent_workers=loader.persistent_workers, collate_fn=loader.collate_fn)
+    loader = iter(loader)
+    step(to_device(next(loader)))
+    spent = {"wait": [], "render": [], "step": []}
+    for _ in range(steps):
+        start = time.perf_counter()
+        packed = next(loader)
+        taken = time.perf_counter()
+        batch = to_device(packed)
+        synchronize(where)
+        rendered = time.perf_counter()
+        step(batch)
+        synchronize(where)
+        for key, seconds in zip(spent, (taken - start, rendered - taken, time.perf_counter() - rendered)):
+            spent[key].append(seconds)
+    start = time.perf_counter()
+    for _ in range(steps):
+        step(to_device(next(loader)))
+    synchronize(where)
+    rate = steps * cfg.recipe.batch_size / (time.perf_counter() - start)
+    return {**{key: 1e3 * sum(v[steps // 2:]) / len(v[steps // 2:]) for key, v in spent.items()},
+            "samples_per_s": rate}
+
+
 def profile_training(device: str, steps: int, workers: int | None, out: Path, top: int = 25) -> None:
     """Train ``recipe=paper`` for ``steps`` steps in this process under cProfile and print where
     the training process spends its time (its own functions, not the workers'): waiting on the
@@ -180,6 +241,14 @@ def paper_data(device: str, *overrides: str) -> tuple:
     return cfg, data
 
 
+def cfg_workers(workers: int | None) -> int:
+    """The training rows' worker processes: ``workers``, else ``recipe=paper``'s on this machine."""
+    from unps.lightnet.data import loader_workers
+    from unps.threads import available_cpus
+
+    return loader_workers(paper_config().recipe.workers if workers is None else workers, available_cpus())
+
+
 def paper_config(*overrides: str):
     from hydra import compose, initialize_config_module
 
@@ -197,14 +266,19 @@ def main() -> None:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--device", default="cuda")
     parser.add_argument("--out", type=Path, default=Path("runs/gpu"))
-    parser.add_argument("--rows", nargs="+", default=list(ROWS[:-1]), choices=ROWS,
-                        help="which rows to run; 'profile' (not run by default) prints where a short "
-                             "training run's process spends its time")
+    parser.add_argument("--rows", nargs="+", default=list(ROWS[:-2]), choices=ROWS,
+                        help="which rows to run; 'loop' and 'profile' (not run by default) time the "
+                             "training loop's parts by hand and print where a short training run's "
+                             "process spends its time")
     parser.add_argument("--subjects", nargs="+", default=["cat", "pot1"])
     parser.add_argument("--default-subject", default="cat", help="the subject of the default command")
     parser.add_argument("--steps", type=int, default=1000, help="steps of the paper-preset fits")
     parser.add_argument("--train-steps", type=int, default=100)
     parser.add_argument("--workers", type=int, default=None, help="recipe.workers of the training rows")
+    parser.add_argument("--precisions", nargs="+", default=["32-true", "bf16-mixed"],
+                        choices=["32-true", "bf16-mixed"], help="recipe.precision of the training rows")
+    parser.add_argument("--threads", type=int, default=None,
+                        help="recipe.threads of the training rows (the training process's CPU threads)")
     parser.add_argument("--render-samples", type=int, default=128)
     parser.add_argument("--diligent", type=Path, default=DILIGENT)
     args = parser.parse_args()
@@ -233,14 +307,17 @@ def main() -> None:
 
     steps = args.train_steps
     workers = [] if args.workers is None else [f"recipe.workers={args.workers}"]
-    for precision in ("32-true", "bf16-mixed") if "train" in args.rows else ():
-        metrics, _ = run(args.out / f"train-{precision}", "unps.train", "recipe=paper",
+    workers += [] if args.threads is None else [f"recipe.threads={args.threads}"]
+    for precision in args.precisions if "train" in args.rows else ():
+        suffix = "" if args.threads is None else f"-threads{args.threads}"
+        metrics, _ = run(args.out / f"train-{precision}{suffix}", "unps.train", "recipe=paper",
                          f"recipe.precision={precision}", f"recipe.max_steps={steps}",
                          f"recipe.val_every={steps}", "recipe.val_samples=64", *workers, *device)
         overall = metrics["steps"] * 32 / metrics["train_seconds"]
         running = metrics.get("train_samples_per_s")
         running = "–" if running is None else f"{running:.1f}"
-        print(f"| training, recipe=paper recipe.precision={precision}, {steps} steps of 32 | "
+        threads = "" if args.threads is None else f" recipe.threads={args.threads}"
+        print(f"| training, recipe=paper recipe.precision={precision}{threads}, {steps} steps of 32 | "
               f"{metrics['train_seconds']:.1f} | – | {memory(metrics)} | {overall:.1f} samples/s over the "
               f"run (start-up and a validation of 64 included), {running} once running |", flush=True)
 
@@ -256,11 +333,21 @@ def main() -> None:
         print(f"| the network's training step alone (batch 32) | – | – | – | "
               f"{'; '.join(f'{p} {r:.1f}' for p, r in rates.items())} samples/s |", flush=True)
 
+    if "loop" in args.rows:
+        taken, threads = cfg_workers(args.workers), args.threads or torch.get_num_threads()
+        for pinned in (True, False) if args.device.startswith("cuda") else (True,):
+            parts = loop_breakdown(args.device, args.train_steps, args.workers, threads, pinned)
+            pinning = "" if args.device == "cpu" else f", batches {'pinned' if pinned else 'not pinned'}"
+            print(f"| training loop by hand, {taken} workers, {threads} threads in the training process"
+                  f"{pinning} | – | – | – | per step: waiting on the "
+                  f"loader {parts['wait']:.0f} ms, rendering {parts['render']:.0f} ms, the network's step "
+                  f"{parts['step']:.0f} ms; {parts['samples_per_s']:.1f} samples/s unwaited |", flush=True)
+
     if "profile" in args.rows:
         profile_training(args.device, args.train_steps, args.workers, args.out / "profile")
 
 
-ROWS = ("paper", "default", "train", "data", "profile")
+ROWS = ("paper", "default", "train", "data", "loop", "profile")
 
 
 if __name__ == "__main__":

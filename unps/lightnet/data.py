@@ -8,10 +8,12 @@ import lightning as L
 import torch
 from torch.utils.data import DataLoader, Dataset
 
+from unps.errors import InputError
 from unps.lightnet.materials import MaterialBank
 from unps.lightnet.rig import Camera
 from unps.lightnet.meshes import mesh_views
 from unps.lightnet.synthesis import LightDataset, Scene, SceneBatch, render_batch
+from unps.threads import available_cpus
 
 VALIDATION_SEED_OFFSET = 1_000_003   # validation stacks never share a (seed, index) with training
 
@@ -28,6 +30,7 @@ class LightData(L.LightningDataModule):
         data: ``meshes_dir``, ``views_per_mesh``, ``lights_per_shape``, ``max_zenith_deg``,
             ``materials``, ``mesh_fraction``, ``texture``, ``perturbation``, ``saturation``,
             ``shapes``, ``layouts``, ``camera`` (the ``data`` node of ``unps/conf/train.yaml``).
+            ``recipe.workers`` null takes :func:`loader_workers` of this machine's CPUs.
         seed: the run's seed.
         start_step: the step training resumes from; its first ``start_step · batch_size`` items
             were seen before.
@@ -44,6 +47,7 @@ class LightData(L.LightningDataModule):
         super().__init__()
         self.recipe, self.data, self.seed, self.start_step = recipe, data, seed, start_step
         self.device = device
+        self.workers = loader_workers(recipe.workers, available_cpus())
         self.train_set: LightDataset | None = None
         self.val_set: LightDataset | None = None
 
@@ -68,12 +72,13 @@ class LightData(L.LightningDataModule):
                                     **common)
 
     def _loader(self, dataset: LightDataset) -> DataLoader:
-        workers = self.recipe.workers
+        workers = self.workers
         if self.device.type == "cpu":
             return DataLoader(dataset, batch_size=self.recipe.batch_size, num_workers=workers,
                               persistent_workers=workers > 0)
         return DataLoader(Draws(dataset), batch_size=self.recipe.batch_size, num_workers=workers,
-                          persistent_workers=workers > 0, collate_fn=SceneBatch.of)
+                          persistent_workers=workers > 0, collate_fn=SceneBatch.of,
+                          pin_memory=torch.cuda.is_available())   # SceneBatch.pin_memory
 
     def transfer_batch_to_device(self, batch, device: torch.device, dataloader_idx: int):
         """A batch of draws (device path, a :class:`SceneBatch`) rendered on ``device``; a rendered
@@ -85,15 +90,33 @@ class LightData(L.LightningDataModule):
     def workers_note(self) -> str:
         """Where the stacks are rendered, for the log."""
         if self.device.type != "cpu":
-            return (f"training data drawn in {self.recipe.workers} worker process(es) and rendered "
-                    f"on {self.device}")
-        return f"training data rendered in {self.recipe.workers} worker process(es)"
+            return f"training data drawn in {self.workers} worker process(es) and rendered on {self.device}"
+        return f"training data rendered in {self.workers} worker process(es)"
 
     def train_dataloader(self) -> DataLoader:
         return self._loader(self.train_set)
 
     def val_dataloader(self) -> DataLoader:
         return self._loader(self.val_set)
+
+
+def loader_workers(requested: int | None, cpus: int) -> int:
+    """The training loader's worker processes: ``requested`` (``recipe.workers``), or for None every
+    CPU but two, which the training process and its loader's thread take.
+
+    Example:
+        >>> loader_workers(None, 16), loader_workers(None, 2), loader_workers(3, 16)
+        (14, 0, 3)
+
+    Raises:
+        InputError: a negative or fractional ``requested``.
+    """
+    if requested is None:
+        return max(cpus - 2, 0)
+    if isinstance(requested, bool) or not isinstance(requested, int) or requested < 0:
+        raise InputError(f"recipe.workers must be a whole number >= 0 (or null: every CPU but two), "
+                         f"got {requested!r}")
+    return requested
 
 
 class Draws(Dataset):

@@ -13,6 +13,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from unps.device import to_device
 from unps.errors import InputError
 from unps.lightnet.brdf import (AnalyticBRDF, ggx_lobe, random_analytic, random_measured, read_merl_binary,
                                 read_neural_brdf)
@@ -79,7 +80,7 @@ def shade_batch(normals: torch.Tensor, mask: torch.Tensor, lobes: LobeTable, oth
     group = max(1, budget // (n * h * w))
     for first in range(0, len(analytic), group):
         pick = analytic[first:first + group]
-        index = torch.tensor(pick).to(normals.device, non_blocking=True)
+        index = to_device(torch.tensor(pick), normals.device)
         frame = local_frames(normals[index].flatten(1, 2))                     # (G, P, 3, 3)
         wi = torch.einsum("gpij,glj->glpi", frame, lights[index])              # (G, n, P, 3)
         wo = frame[..., 2][:, None].expand_as(wi)
@@ -119,7 +120,7 @@ class LobeTable:
                    rows("fresnel0", 0.04))
 
     def to(self, device: torch.device) -> LobeTable:
-        return LobeTable(*(getattr(self, f.name).to(device, non_blocking=True) for f in fields(self)))
+        return LobeTable(*(to_device(getattr(self, f.name), device) for f in fields(self)))
 
     def rows(self, index: torch.Tensor) -> LobeTable:
         return LobeTable(*(getattr(self, f.name)[index] for f in fields(self)))

@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 
 import torch
 
+from unps.device import to_device
+
 LAYOUTS = ("cap", "dome", "ring")
 FORMATS = ("float", "round8", "floor8", "round16")
 
@@ -161,7 +163,7 @@ def noise_on(exposure: Exposure, shape: torch.Size, device: torch.device) -> tor
     drawn there from its seed (the same numbers on every run of one kind of device; a CPU and a
     GPU draw different ones)."""
     if isinstance(exposure.noise, torch.Tensor):
-        return exposure.noise.to(device, non_blocking=True)
+        return to_device(exposure.noise, device)
     generator = torch.Generator(device).manual_seed(exposure.noise)
     return torch.randn(shape, generator=generator, device=device)
 
@@ -179,8 +181,8 @@ def record_batch(images: torch.Tensor, exposures: list[Exposure]) -> torch.Tenso
         (B, n, 3, H, W) in [0, 1]: exposed, noisy, clipped at full scale and quantised.
     """
     device, shape = images.device, images.shape[1:]
-    per_stack = lambda values: torch.tensor(values, dtype=torch.float32).to(   # noqa: E731
-        device, non_blocking=True).view(-1, 1, 1, 1, 1)
+    per_stack = lambda values: to_device(torch.tensor(values, dtype=torch.float32),   # noqa: E731
+                                         device).view(-1, 1, 1, 1, 1)
     values = images * per_stack([e.gain for e in exposures])
     sigma = torch.sqrt(per_stack([e.shot for e in exposures]) * values.clamp_min(0)
                        + per_stack([e.read ** 2 for e in exposures]))
@@ -188,6 +190,6 @@ def record_batch(images: torch.Tensor, exposures: list[Exposure]) -> torch.Tenso
     values = (values + sigma * noise).clamp(0, 1)
     storages = [e.storage for e in exposures]
     for storage in set(storages) - {"float"}:
-        pick = torch.tensor([i for i, s in enumerate(storages) if s == storage]).to(device, non_blocking=True)
+        pick = to_device(torch.tensor([i for i, s in enumerate(storages) if s == storage]), device)
         values[pick] = quantize(values[pick], storage)
     return values

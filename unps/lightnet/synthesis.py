@@ -13,12 +13,13 @@ pixel is 2 / resolution units and depth is in the same units.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, is_dataclass, replace
 
 import torch
 import torch.nn.functional as F
 from torch.utils.data import Dataset
 
+from unps.device import to_device
 from unps.errors import InputError
 from unps.geometry import ShadowPlan, march_shadows
 from unps.lightnet.brdf import AnalyticBRDF
@@ -216,6 +217,12 @@ class SceneBatch:
     saturation: float | None
     perturbation: torch.Tensor | None
 
+    def pin_memory(self) -> SceneBatch:
+        """This batch with its tensors in page-locked memory, so that :func:`render_batch` queues
+        its copies to the GPU without waiting (the loader's ``pin_memory``, done in a thread of
+        the training process as batches arrive)."""
+        return map_tensors(self, torch.Tensor.pin_memory)
+
     @classmethod
     def of(cls, scenes: list[Scene]) -> SceneBatch:
         """The draws of ``scenes`` (all of one dataset), packed and planned."""
@@ -245,7 +252,7 @@ def render_batch(batch: SceneBatch, device: torch.device) -> dict[str, torch.Ten
         ``images`` (B, n, 3, H, W), ``mask`` (B, 1, H, W), ``directions`` (B, n, 3),
         ``intensities`` (B, n), float32, and ``family`` (B,) int64, all on ``device``.
     """
-    to = lambda x: x.to(device, non_blocking=True)     # noqa: E731
+    to = lambda x: to_device(x, device)     # noqa: E731
     mask = to(batch.shadows.mask)
     images = shade_batch(to(batch.normals), mask, batch.lobes.to(device), batch.others, to(batch.lights),
                          to(batch.intensities), to(batch.albedo), march_shadows(batch.shadows, device))
@@ -260,6 +267,18 @@ def render_batch(batch: SceneBatch, device: torch.device) -> dict[str, torch.Ten
     return {"images": images * mask[:, None], "mask": mask.float(), "directions": to(batch.lights.float()),
             "intensities": to(batch.intensities.float()),
             "family": to(torch.tensor([FAMILIES.index(family) for family in batch.families]))}
+
+
+def map_tensors(item, function):
+    """``item`` with ``function`` applied to each tensor in it, in its dataclasses and tuples at any
+    depth; everything else (numbers, strings, modules, dicts) kept as it is."""
+    if isinstance(item, torch.Tensor):
+        return function(item)
+    if is_dataclass(item) and not isinstance(item, type):
+        return replace(item, **{f.name: map_tensors(getattr(item, f.name), function) for f in fields(item)})
+    if isinstance(item, tuple):
+        return tuple(map_tensors(value, function) for value in item)
+    return item
 
 
 def albedo_rgb(albedo: torch.Tensor | None, size: torch.Size) -> torch.Tensor:
