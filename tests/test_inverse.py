@@ -12,9 +12,10 @@ from hydra import compose, initialize_config_module
 from unps.data.analytic import render_lambertian
 from unps.errors import Diverged, InputError
 from unps.geometry import continue_surface
+from unps.grid import block_mean
 from unps.fit import fit
 from unps.inverse.fit import (FAR_FROM_START_DEG, build_system, distance_from_start, interreflection_bend,
-                              neural_inverse_rendering)
+                              neural_inverse_rendering, solved_per_pixel, unit)
 from unps.inverse.settings import InterreflectionModel, Preset
 from unps.inverse.grids import unclipped, upsample_normals, upsample_with_detail, working_factor
 from unps.inverse.interreflection import Interreflection
@@ -90,6 +91,7 @@ def test_batch_norm_reads_out_with_the_statistics_it_was_fitted_with():
     ("batch_norm", "yes", "preset.batch_norm must be true or false, got 'yes'"),
     ("cast_shadows", 1, "preset.cast_shadows must be true or false, got 1"),
     ("continue_black", "yes", "preset.continue_black must be true or false, got 'yes'"),
+    ("refine_pixels", "no", "preset.refine_pixels must be true or false, got 'no'"),
     ("init", "woodham", "preset.init must be one of robust, least_squares, got 'woodham'"),
     ("residual", "l2", "preset.residual must be one of absolute, sqrt, relative, albedo, got 'l2'")])
 def test_a_preset_names_a_bad_network_setting(field, value, message):
@@ -434,6 +436,50 @@ def test_pixels_black_in_every_image_get_the_surface_continued(caplog):
     np.testing.assert_allclose(continued.normals[band], expected[band], atol=1e-4)
     assert angular_error(continued.normals[band], plain.normals[band]).mean() > 1
     assert "of the object is black in every image" in caplog.text and "continued" in caplog.text
+
+
+def test_a_fit_on_a_coarser_grid_solves_each_pixel_of_the_subject(caplog):
+    """A 40×40 Lambertian sphere fitted on a ×2 grid: each pixel's normal solved from its own
+    images under the fitted reflectance is nearer the truth than the upsampled fit, which
+    ``refine_pixels=false`` returns."""
+    sphere = render_lambertian("sphere", size=40, n_lights=16, seed=1)
+    caplog.set_level("INFO")
+
+    def fitted(refine: bool):
+        torch.manual_seed(0)
+        return neural_inverse_rendering(sphere, sphere.light_directions,
+                                        Preset.from_config(**TINY, max_pixels=400, refine_pixels=refine),
+                                        InterreflectionModel(enabled=False))
+
+    refined, plain = fitted(True), fitted(False)
+    assert refined.info["fit_downsample"] == 2
+    error = {name: angular_error(e.normals, sphere.normals)[sphere.mask].mean()
+             for name, e in (("refined", refined), ("plain", plain))}
+    assert error["refined"] < 0.5 * error["plain"]
+    assert "each pixel's normal solved from its own images" in caplog.text
+
+
+def test_each_pixel_is_solved_for_the_normal_the_fit_renders_and_brought_back(caplog):
+    """Rendered with interreflected normals N_ny = N_o + d (d, the fit's N_ny − N_o), each pixel's
+    solve finds N_ny and takes d off again: N_o, which the images alone would not give."""
+    sphere = render_lambertian("sphere", size=24, n_lights=16, seed=3)
+    offset = np.broadcast_to(np.array([0.08, -0.03, 0.0], np.float32), sphere.normals.shape)
+    rendered = unit(sphere.normals + offset)
+    shading = np.clip(np.einsum("hwc,nc->nhw", rendered, sphere.light_directions), 0, None)
+    images = (np.full(3, 0.8) * shading[..., None] * sphere.mask[None, ..., None]).astype(np.float32)
+    subject = sphere.replace(images=images, light_intensities=None)
+    _, coarse = block_mean(np.zeros((24, 24, 1)), sphere.mask, 2)
+    reflectance = np.full((16, *coarse.shape, 3), 0.8, np.float32)
+    caplog.set_level("INFO")
+
+    def solved(interreflected):
+        return solved_per_pixel(subject, sphere.normals, interreflected, reflectance, sphere.light_directions,
+                                np.ones(16, np.float32), coarse, 2)[sphere.mask]
+
+    truth = sphere.normals[sphere.mask]
+    assert angular_error(solved(offset), truth).mean() < 0.3      # the offset is taken off unit vectors
+    assert angular_error(solved(np.zeros_like(offset)), truth).mean() > 3
+    assert "each pixel's normal solved from its own images" in caplog.text
 
 
 @pytest.mark.parametrize("tilt, warned", [(5.0, False), (30.0, True)])

@@ -8,9 +8,10 @@ The subject is cropped to its mask (and, when the preset caps the pixel count, b
 to a working grid); the initialisation (``preset.init``: robust by default) gives N_init and the
 albedo P; the networks are fitted for ``steps`` Adam steps
 (:class:`unps.inverse.system.InverseRendering`); the normals come back on the subject's own grid
-(from a working grid with the initialisation's finer detail added:
-:func:`unps.inverse.grids.upsample_with_detail`). With an output folder, checkpoints land in
-``checkpoints/`` every ``update_every`` steps and a rerun in the same folder resumes.
+(from a working grid with the initialisation's finer detail added,
+:func:`unps.inverse.grids.upsample_with_detail`, then each pixel's solved from its own images under
+the fitted reflectance, :func:`unps.inverse.pixels.refine_pixel_normals`). With an output folder,
+checkpoints land in ``checkpoints/`` every ``update_every`` steps and a rerun in the same folder resumes.
 """
 
 from __future__ import annotations
@@ -22,16 +23,17 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from unps.data.checks import black_everywhere
+from unps.data.checks import black_everywhere, clipped_values
 from unps.data.estimate import Estimate, Rendering
 from unps.data.subject import Subject
 from unps.device import resolve_device
 from unps.errors import InputError
 from unps.geometry import continue_surface
 from unps.inverse.control import fingerprint, train
-from unps.inverse.grids import on_subject_grid, unclipped, upsample_with_detail, working_factor
+from unps.inverse.grids import on_subject_grid, unclipped, upsample_map, upsample_with_detail, working_factor
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet
+from unps.inverse.pixels import refine_pixel_normals
 from unps.inverse.settings import InterreflectionModel, Preset
 from unps.inverse.system import InverseRendering
 from unps.metrics import angular_error
@@ -99,14 +101,18 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
         bend = interreflection_bend(normals, pseudo_normals, work.mask) if solver else None
         coarse_init = system.init_normals[0].permute(1, 2, 0).cpu().numpy()
         moved = distance_from_start(normals, coarse_init, work.mask, preset.init)
+        directions, scales = rendering["light_directions"], rendering["light_scales"]
         if factor > 1:
             fine_init = initial_estimate(cropped, light_directions, preset.init, device).normals
-            normals = upsample_with_detail(normals, coarse_init, fine_init,
-                                           work.mask, factor)
+            upsampled = upsample_with_detail(normals, coarse_init, fine_init, work.mask, factor)
+            if preset.refine_pixels:
+                interreflected = upsample_map(pseudo_normals - normals, work.mask, cropped.mask.shape, factor)
+                upsampled = solved_per_pixel(cropped, upsampled, interreflected, rendering["reflectance"],
+                                             directions, scales, work.mask, factor)
+            normals = upsampled
         black = black_everywhere(cropped.observed_images(), cropped.mask)
         if preset.continue_black and black.any():
             normals = continue_surface(normals, cropped.mask, black)
-        directions, scales = rendering["light_directions"], rendering["light_scales"]
         normals, albedo = on_subject_grid(normals, cropped, subject, directions, scales)
     black_share = float(black.sum() / cropped.mask.sum())
     if black.any():
@@ -127,6 +133,48 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
     rendering = Rendering(work.mask, work.images, rendering["reconstruction"], rendering["reflectance"])
     return Estimate(normals, albedo, light_directions=directions if refine_lights else None,
                     light_scales=scales if refine_lights else None, rendering=rendering, info=info)
+
+
+def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.ndarray,
+                     reflectance: np.ndarray, directions: np.ndarray, scales: np.ndarray,
+                     work_mask: np.ndarray, factor: int) -> np.ndarray:
+    """The upsampled fit's normals with each pixel's solved from its own images
+    (:func:`unps.inverse.pixels.refine_pixel_normals`) under the fitted reflectance, upsampled.
+
+    The fit renders with the interreflected normals N_ny, not N_o: each pixel is solved for its
+    N_ny, starting from the upsampled N_o moved by the fit's N_ny − N_o there, and that offset is
+    taken off again (on BrokenPot, whose interreflections bend N_o by 2.6°, solving for N_o
+    directly cost 1.5°).
+
+    Args:
+        cropped: the subject's crop, (H, W) grid; normals: (H, W, 3) the upsampled fit there.
+        interreflected: (H, W, 3) the fit's N_ny − N_o, upsampled (zero without interreflections).
+        reflectance: (n, h, w, 3) the fitted reflectance R on the working grid (``work_mask``,
+            ``factor`` times coarser), in the subject's units; directions: (n, 3) and scales: (n,)
+            the lights the fit rendered with.
+
+    Returns:
+        (H, W, 3) unit normals on the crop's object.
+    """
+    mask = cropped.mask
+    colour = np.stack([upsample_map(r, work_mask, mask.shape, factor)[mask] for r in reflectance])
+    colour *= scales[:, None, None]
+    usable = ~clipped_values(cropped.observed_images(), mask)[:, mask]
+    start, offset = normals[mask], interreflected[mask]
+    solved, ok = refine_pixel_normals(cropped.images[:, mask], colour, unit(start + offset), directions,
+                                      usable)
+    solved = unit(solved - offset)
+    log.info("each pixel's normal solved from its own images under the fitted reflectance: %d of %d "
+             "pixels, %.2f° from the upsampled fit on average", ok.sum(), ok.size,
+             float(angular_error(solved, start).mean()))
+    refined = normals.copy()
+    refined[mask] = solved
+    return refined
+
+
+def unit(vectors: np.ndarray) -> np.ndarray:
+    """(…, 3) vectors scaled to unit length."""
+    return vectors / np.maximum(np.linalg.norm(vectors, axis=-1, keepdims=True), 1e-12)
 
 
 def build_system(work: Subject, light_directions: np.ndarray, preset: Preset,

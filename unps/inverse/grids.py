@@ -31,11 +31,19 @@ def upsample_normals(normals: np.ndarray, mask: np.ndarray, shape: tuple[int, in
     Values off the coarse mask are first filled from the nearest object pixel, so the bilinear
     interpolation near the silhouette mixes only object normals.
     """
+    up = upsample_map(normals, mask, shape, factor)
+    return up / np.maximum(np.linalg.norm(up, axis=-1, keepdims=True), 1e-12)
+
+
+def upsample_map(values: np.ndarray, mask: np.ndarray, shape: tuple[int, int], factor: int) -> np.ndarray:
+    """(h, w, C) values of a grid ``factor`` times coarser → (H, W, C) float32, bilinear, the values
+    off the coarse ``mask`` first filled from the nearest object pixel (so that near the silhouette
+    only object values mix)."""
     _, (rows, cols) = distance_transform_edt(~mask, return_indices=True)
-    filled = normals[rows, cols].astype(np.float32)
+    filled = values[rows, cols].astype(np.float32)
     size = (mask.shape[1] * factor, mask.shape[0] * factor)
     up = cv2.resize(filled, size, interpolation=cv2.INTER_LINEAR)[: shape[0], : shape[1]]
-    return up / np.maximum(np.linalg.norm(up, axis=-1, keepdims=True), 1e-12)
+    return up.reshape(*shape, values.shape[-1])
 
 
 def unclipped(cropped: Subject, factor: int) -> np.ndarray | None:

@@ -32,6 +32,9 @@ class Preset:
             (:func:`unps.data.checks.black_everywhere`: the images hold no shading there) are
             those of the surface continued from the pixels around them
             (:func:`unps.geometry.continue_surface`), not the normal network's guess.
+        refine_pixels: beyond the paper, a fit on a coarser working grid has each pixel's normal
+            on the subject's grid solved against its own images under the fitted reflectance
+            (:func:`unps.inverse.pixels.refine_pixel_normals`); no effect at full resolution.
         schedule: the optimisation's :class:`Schedule`.
     """
 
@@ -47,6 +50,7 @@ class Preset:
     batch_norm: bool = True
     init: str = "robust"
     continue_black: bool = True
+    refine_pixels: bool = True
     schedule: Schedule = Schedule()
 
     def __post_init__(self):
@@ -56,7 +60,7 @@ class Preset:
                              f"{self.reflectance_branch!r}")
         if self.init not in INITS:
             raise InputError(f"preset.init must be one of {', '.join(INITS)}, got {self.init!r}")
-        for name in ("batch_norm", "cast_shadows", "continue_black"):
+        for name in ("batch_norm", "cast_shadows", "continue_black", "refine_pixels"):
             if not isinstance(getattr(self, name), bool):
                 raise InputError(f"preset.{name} must be true or false, got {getattr(self, name)!r}")
 

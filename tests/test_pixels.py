@@ -1,0 +1,67 @@
+"""Each pixel's normal solved against its images under a given reflectance (unps.inverse.pixels)."""
+
+import numpy as np
+import pytest
+
+from unps.inverse.pixels import refine_pixel_normals
+from unps.metrics import angular_error
+
+
+def unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+@pytest.fixture
+def stack():
+    """200 pixels of random normals facing the camera, each its own RGB albedo, under 24 lights
+    on a 50° cap: Lambertian values, and a start 8° off each true normal."""
+    rng = np.random.default_rng(3)
+    normals = unit(rng.normal(size=(200, 3)) * [1, 1, 0.3] + [0, 0, 1])
+    zenith, azimuth = np.radians(rng.uniform(5, 50, 24)), rng.uniform(0, 2 * np.pi, 24)
+    lights = np.stack([np.sin(zenith) * np.cos(azimuth), np.sin(zenith) * np.sin(azimuth), np.cos(zenith)], -1)
+    colour = np.broadcast_to(rng.uniform(0.2, 1.0, (200, 3)), (24, 200, 3)).copy()
+    images = colour * np.clip(normals @ lights.T, 0, None).T[..., None]
+    start = unit(normals + 0.14 * unit(np.cross(normals, rng.normal(size=(200, 3)))))
+    return images, colour, normals, lights, start
+
+
+def test_a_lambertian_stack_gives_each_pixel_its_true_normal(stack):
+    images, colour, normals, lights, start = stack
+    assert angular_error(start, normals).mean() > 7
+    solved, ok = refine_pixel_normals(images, colour, start, lights)
+    assert ok.all() and angular_error(solved, normals).max() < 1e-3
+
+
+def test_values_in_a_cast_shadow_and_clipped_values_are_left_out(stack):
+    images, colour, normals, lights, start = stack
+    shading = (normals @ lights.T).T
+    rng = np.random.default_rng(0)
+    shadowed = (shading > 0.3) & (rng.random(shading.shape) < 0.15)
+    clipped = (shading > 0.3) & ~shadowed & (rng.random(shading.shape) < 0.15)
+    seen = images.copy()
+    seen[shadowed] = 0.0
+    seen[clipped] *= 0.6                     # a ceiling below the value
+    solved, ok = refine_pixel_normals(seen, colour, start, lights, usable=~clipped)
+    assert ok.all() and angular_error(solved, normals).max() < 1e-3
+    blind, _ = refine_pixel_normals(seen, colour, start, lights)
+    assert angular_error(blind, normals).mean() > 0.1    # L1 resists them, but not wholly
+
+
+def test_l1_passes_over_a_highlight_that_least_squares_follows(stack):
+    images, colour, normals, lights, start = stack
+    shading = (normals @ lights.T).T
+    brightest = np.argmax(shading, axis=0)
+    seen = images.copy()
+    seen[brightest, np.arange(200)] *= 2.5     # a highlight the reflectance does not hold
+    least_squares, _ = refine_pixel_normals(seen, colour, start, lights, reweightings=0)
+    l1, _ = refine_pixel_normals(seen, colour, start, lights)
+    assert angular_error(l1, normals).mean() < 0.5 * angular_error(least_squares, normals).mean()
+
+
+def test_a_pixel_with_too_few_lit_images_keeps_its_start(stack):
+    images, colour, normals, lights, start = stack
+    seen = images.copy()
+    seen[3:, 7] = 0.0                           # pixel 7: three images left
+    solved, ok = refine_pixel_normals(seen, colour, start, lights)
+    assert not ok[7] and ok[np.arange(200) != 7].all()
+    np.testing.assert_array_equal(solved[7], start[7])

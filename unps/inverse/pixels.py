@@ -1,0 +1,93 @@
+"""Each pixel's normal on the subject's own grid, solved against its images with the fitted reflectance.
+
+A fit on a working grid ``f`` times coarser than the subject cannot hold detail finer than ``f``
+pixels; its normals come back by upsampling, with the robust initialisation's finer detail added
+(:func:`unps.inverse.grids.upsample_with_detail`). The fitted reflectance is smooth at that scale
+too, but the images are not: holding each image's reflectance at its upsampled value, each pixel's
+normal is what its own images say under the fit's rendering model,
+
+    I_j(p) ≈ c_j(p) · max(n(p)·l_j, 0),     c_j(p) = scale_j · R_j(p)  (RGB),
+
+solved for n(p) in the L1 sense of the fit's loss, over the images that light the pixel and do not
+leave it in a shadow the model cannot render. Frame: unps's (x right, y up, z toward the camera).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+SHADOW_RATIO = 0.3
+"""A value below this share of what the model renders under the start's normal is taken for a
+cast shadow (or a dark spot the model cannot render) and left out."""
+LIT = 0.02
+"""Images whose light meets the normal at n·l below this are left out (attached shadow)."""
+MIN_IMAGES = 4
+"""A pixel with fewer usable images keeps its start."""
+
+
+def observed_shading(images: np.ndarray, colour: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each value's shading t = max(n·l, 0) as the model reads it, and how much it weighs.
+
+    Args:
+        images: (n, P, 3) observed values; colour: (n, P, 3) c_j(p), the model's value at t = 1.
+
+    Returns:
+        (n, P) t = <I, c> / <c, c> (the least-squares shading of the three channels), and (n, P) |c|:
+        an L1 residual in image units, |I − c·t|, is about |c|·|t_observed − t|.
+    """
+    power = (colour ** 2).sum(-1)
+    return (colour * images).sum(-1) / np.maximum(power, 1e-12), np.sqrt(power)
+
+
+def weighted_normals(shading: np.ndarray, weight: np.ndarray, lights: np.ndarray) -> np.ndarray:
+    """(P, 3) unit normals minimising Σ_j w_j (t_j − n·l_j)² per pixel (unnormalised n, then scaled).
+
+    Args:
+        shading: (n, P) observed shading t; weight: (n, P) ≥ 0; lights: (n, 3) unit directions.
+
+    Returns:
+        (P, 3); NaN or arbitrary where the weighted lights do not span three directions (the caller
+        keeps only pixels with enough images).
+    """
+    gram = np.einsum("jp,ja,jb->pab", weight, lights, lights)
+    target = np.einsum("jp,jp,ja->pa", weight, shading, lights)
+    ridge = (1e-9 * np.einsum("paa->p", gram) + 1e-30)[:, None, None] * np.eye(3)   # never singular
+    with np.errstate(invalid="ignore", divide="ignore"):
+        solved = np.linalg.solve(gram + ridge, target[..., None])[..., 0]
+        return solved / np.linalg.norm(solved, axis=-1, keepdims=True)
+
+
+def refine_pixel_normals(images: np.ndarray, colour: np.ndarray, normals: np.ndarray, lights: np.ndarray,
+                         usable: np.ndarray | None = None,
+                         reweightings: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Each pixel's normal under the fitted reflectance, from its own images (L1, by iteratively
+    reweighted least squares), starting from ``normals``.
+
+    Args:
+        images: (n, P, 3) the pixels' values, divided by the light intensities.
+        colour: (n, P, 3) the model's value of each at shading 1: light scale × fitted reflectance.
+        normals: (P, 3) unit, the start (the upsampled fit), which also decides which values are
+            in shadow.
+        lights: (n, 3) unit surface-to-light directions.
+        usable: (n, P) bool, False for values the fit left out (clipped); None: all.
+        reweightings: L1 reweightings after the least-squares solve.
+
+    Returns:
+        (P, 3) unit normals, and (P,) bool: the pixels solved (the others keep their start: fewer
+        than :data:`MIN_IMAGES` usable images, or lights that do not span three directions).
+    """
+    shading, weight = observed_shading(images, colour)
+    rendered = np.clip(normals @ lights.T, 0, None).T                          # (n, P)
+    keep = (rendered > LIT) & (shading > SHADOW_RATIO * rendered)
+    if usable is not None:
+        keep &= usable
+    current = normals
+    for step in range(1 + reweightings):
+        facing = keep & ((current @ lights.T).T > LIT)
+        w = weight * facing
+        if step:
+            w = w / np.maximum(np.abs(shading - (current @ lights.T).T), 1e-2)
+        solved = weighted_normals(shading, w, lights)
+        ok = np.isfinite(solved).all(-1) & (facing.sum(0) >= MIN_IMAGES)
+        current = np.where(ok[:, None], solved, normals)
+    return current, ok
