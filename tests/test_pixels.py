@@ -65,3 +65,17 @@ def test_a_pixel_with_too_few_lit_images_keeps_its_start(stack):
     solved, ok = refine_pixel_normals(seen, colour, start, lights)
     assert not ok[7] and ok[np.arange(200) != 7].all()
     np.testing.assert_array_equal(solved[7], start[7])
+
+
+def test_a_solution_facing_away_from_the_camera_keeps_the_start(stack):
+    """A pixel whose images say its normal points away from the camera (n_z < 0: lights low
+    enough to reach it) is not seen as such by any pixel of a visible surface: it keeps its start."""
+    images, colour, normals, lights, start = stack
+    zenith, azimuth = np.radians(np.linspace(60, 85, 12)), np.linspace(-0.6, 0.6, 12)
+    low = np.stack([np.sin(zenith) * np.cos(azimuth), np.sin(zenith) * np.sin(azimuth), np.cos(zenith)], -1)
+    away = unit(np.array([1.0, 0.0, -0.15]))
+    seen = 0.7 * np.clip(low @ away, 0, None)[:, None, None] * np.ones((1, 1, 3))
+    begin = unit(np.array([[1.0, 0.0, 0.2]]))
+    solved, ok = refine_pixel_normals(seen, np.full((12, 1, 3), 0.7), begin, low)
+    assert not ok[0]
+    np.testing.assert_array_equal(solved, begin)

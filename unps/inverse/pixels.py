@@ -73,8 +73,9 @@ def refine_pixel_normals(images: np.ndarray, colour: np.ndarray, normals: np.nda
         reweightings: L1 reweightings after the least-squares solve.
 
     Returns:
-        (P, 3) unit normals, and (P,) bool: the pixels solved (the others keep their start: fewer
-        than :data:`MIN_IMAGES` usable images, or lights that do not span three directions).
+        (P, 3) unit normals, and (P,) bool: the pixels solved. The others keep their start: fewer
+        than :data:`MIN_IMAGES` usable images, lights that do not span three directions, or a
+        solution facing away from the camera (n_z ≤ 0, which no pixel of the object can see).
     """
     shading, weight = observed_shading(images, colour)
     rendered = np.clip(normals @ lights.T, 0, None).T                          # (n, P)
@@ -83,11 +84,12 @@ def refine_pixel_normals(images: np.ndarray, colour: np.ndarray, normals: np.nda
         keep &= usable
     current = normals
     for step in range(1 + reweightings):
-        facing = keep & ((current @ lights.T).T > LIT)
+        along = (current @ lights.T).T                                          # (n, P) n·l
+        facing = keep & (along > LIT)
         w = weight * facing
         if step:
-            w = w / np.maximum(np.abs(shading - (current @ lights.T).T), 1e-2)
+            w = w / np.maximum(np.abs(shading - along), 1e-2)
         solved = weighted_normals(shading, w, lights)
-        ok = np.isfinite(solved).all(-1) & (facing.sum(0) >= MIN_IMAGES)
+        ok = np.isfinite(solved).all(-1) & (facing.sum(0) >= MIN_IMAGES) & (solved[:, 2] > 0)
         current = np.where(ok[:, None], solved, normals)
     return current, ok
