@@ -11,6 +11,7 @@ from hydra import compose, initialize_config_module
 
 from unps.data.analytic import render_lambertian
 from unps.errors import Diverged, InputError
+from unps.data.checks import clipped_values
 from unps.geometry import continue_surface
 from unps.grid import block_mean
 from unps.fit import fit
@@ -474,7 +475,7 @@ def test_each_pixel_is_solved_for_the_normal_the_fit_renders_and_brought_back(ca
 
     def solved(interreflected):
         return solved_per_pixel(subject, sphere.normals, interreflected, reflectance, sphere.light_directions,
-                                np.ones(16, np.float32), coarse, 2)[sphere.mask]
+                                np.ones(16, np.float32), coarse, 2, np.ones((16, 24, 24), bool))[sphere.mask]
 
     truth = sphere.normals[sphere.mask]
     assert angular_error(solved(offset), truth).mean() < 0.3      # the offset is taken off unit vectors
@@ -529,9 +530,10 @@ def test_clipped_values_are_found_on_the_working_grid():
     subject = render_lambertian("sphere", size=24, n_lights=12, seed=1)
     top = np.percentile(subject.images[:, subject.mask], 95)
     clipped = subject.replace(images=np.minimum(subject.images, top))
-    usable = unclipped(clipped.crop_to_mask(4), 2)
+    cropped, plain = clipped.crop_to_mask(4), subject.crop_to_mask(4)
+    usable = unclipped(clipped_values(cropped.observed_images(), cropped.mask), cropped.mask, 2)
     assert usable is not None and 0 < (usable == 0).mean() < 0.5
-    assert unclipped(subject.crop_to_mask(4), 1) is None
+    assert unclipped(clipped_values(plain.observed_images(), plain.mask), plain.mask, 1) is None
 
 
 def test_a_fit_that_stops_moving_says_so_and_a_healthy_one_does_not(tmp_path):

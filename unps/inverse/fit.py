@@ -79,7 +79,8 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
     log.info("unps (%s preset): working grid %d×%d (%d object pixels, ×%d coarser than the subject), "
              "%d images", preset.name, w, h, work.mask.sum(), factor, work.n_images)
 
-    usable = unclipped(cropped, factor)
+    clipped = clipped_values(cropped.observed_images(), cropped.mask)
+    usable = unclipped(clipped, cropped.mask, factor)
     if usable is not None:
         log.info("%d of %d values on the working grid hold clipped pixels and are left out of the fit",
                  int((usable[:, work.mask] == 0).sum()), usable[:, work.mask].size)
@@ -108,7 +109,7 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
             if preset.refine_pixels:
                 interreflected = upsample_map(pseudo_normals - normals, work.mask, cropped.mask.shape, factor)
                 upsampled = solved_per_pixel(cropped, upsampled, interreflected, rendering["reflectance"],
-                                             directions, scales, work.mask, factor)
+                                             directions, scales, work.mask, factor, ~clipped)
             normals = upsampled
         black = black_everywhere(cropped.observed_images(), cropped.mask)
         if preset.continue_black and black.any():
@@ -137,7 +138,7 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
 
 def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.ndarray,
                      reflectance: np.ndarray, directions: np.ndarray, scales: np.ndarray,
-                     work_mask: np.ndarray, factor: int) -> np.ndarray:
+                     work_mask: np.ndarray, factor: int, usable: np.ndarray) -> np.ndarray:
     """The upsampled fit's normals with each pixel's solved from its own images
     (:func:`unps.inverse.pixels.refine_pixel_normals`) under the fitted reflectance, upsampled.
 
@@ -152,6 +153,7 @@ def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.n
         reflectance: (n, h, w, 3) the fitted reflectance R on the working grid (``work_mask``,
             ``factor`` times coarser), in the subject's units; directions: (n, 3) and scales: (n,)
             the lights the fit rendered with.
+        usable: (n, H, W) bool, False for the clipped values the fit left out.
 
     Returns:
         (H, W, 3) unit normals on the crop's object.
@@ -159,10 +161,9 @@ def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.n
     mask = cropped.mask
     colour = np.stack([upsample_map(r, work_mask, mask.shape, factor)[mask] for r in reflectance])
     colour *= scales[:, None, None]
-    usable = ~clipped_values(cropped.observed_images(), mask)[:, mask]
     start, offset = normals[mask], interreflected[mask]
     solved, ok = refine_pixel_normals(cropped.images[:, mask], colour, unit(start + offset), directions,
-                                      usable)
+                                      usable[:, mask])
     solved = unit(solved - offset)
     log.info("each pixel's normal solved from its own images under the fitted reflectance: %d of %d "
              "pixels, %.2f° from the upsampled fit on average", ok.sum(), ok.size,

@@ -11,7 +11,6 @@ import cv2
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
-from unps.data.checks import clipped_values
 from unps.data.subject import Subject
 from unps.grid import block_mean
 from unps.solvers.woodham import rgb_albedo
@@ -46,16 +45,18 @@ def upsample_map(values: np.ndarray, mask: np.ndarray, shape: tuple[int, int], f
     return up.reshape(*shape, values.shape[-1])
 
 
-def unclipped(cropped: Subject, factor: int) -> np.ndarray | None:
-    """(n, h, w) float32 on the working grid (``cropped`` block-averaged by ``factor``): 0 where a
-    value holds a clipped pixel (:func:`unps.data.checks.clipped_values`), 1 elsewhere; None when no
-    value is clipped. Clipped values are darker than the truth, so the fit leaves them out."""
-    clipped = clipped_values(cropped.observed_images(), cropped.mask)
+def unclipped(clipped: np.ndarray, mask: np.ndarray, factor: int) -> np.ndarray | None:
+    """(n, h, w) float32 on the working grid (the (H, W) grid of ``mask`` block-averaged by
+    ``factor``): 0 where a value holds a clipped pixel, 1 elsewhere; None when no value is clipped.
+    Clipped values are darker than the truth, so the fit leaves them out.
+
+    Args:
+        clipped: (n, H, W) bool, :func:`unps.data.checks.clipped_values` of the images as captured.
+    """
     if not clipped.any():
         return None
     if factor > 1:
-        clipped = np.stack([block_mean(c[..., None], cropped.mask, factor)[0][..., 0] > 0
-                            for c in clipped])
+        clipped = np.stack([block_mean(c[..., None], mask, factor)[0][..., 0] > 0 for c in clipped])
     return (~clipped).astype(np.float32)
 
 
