@@ -483,6 +483,18 @@ def test_each_pixel_is_solved_for_the_normal_the_fit_renders_and_brought_back(ca
     assert "each pixel's normal solved from its own images" in caplog.text
 
 
+def test_a_pixel_the_solve_leaves_out_keeps_the_upsampled_fit_exactly():
+    """No usable value anywhere: every pixel keeps its start, bit for bit, interreflection
+    offset or not (taking the offset off a start it was added to does not give the start back)."""
+    sphere = render_lambertian("sphere", size=16, n_lights=8, seed=2)
+    offset = np.broadcast_to(np.array([0.2, -0.1, 0.0], np.float32), sphere.normals.shape)
+    _, coarse = block_mean(np.zeros((16, 16, 1)), sphere.mask, 2)
+    kept = solved_per_pixel(sphere, sphere.normals, offset, np.ones((8, *coarse.shape, 3), np.float32),
+                            sphere.light_directions, np.ones(8, np.float32), coarse, 2,
+                            np.zeros((8, 16, 16), bool))
+    np.testing.assert_array_equal(kept[sphere.mask], sphere.normals[sphere.mask])
+
+
 @pytest.mark.parametrize("tilt, warned", [(5.0, False), (30.0, True)])
 def test_a_fit_that_ends_far_from_its_start_says_so(caplog, tilt, warned):
     mask = np.ones((4, 5), bool)

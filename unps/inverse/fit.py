@@ -156,7 +156,7 @@ def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.n
         usable: (n, H, W) bool, False for the clipped values the fit left out.
 
     Returns:
-        (H, W, 3) unit normals on the crop's object.
+        (H, W, 3) unit normals on the crop's object; pixels the solve leaves out keep ``normals``.
     """
     mask = cropped.mask
     colour = np.stack([upsample_map(r, work_mask, mask.shape, factor)[mask] for r in reflectance])
@@ -164,7 +164,7 @@ def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.n
     start, offset = normals[mask], interreflected[mask]
     solved, ok = refine_pixel_normals(cropped.images[:, mask], colour, unit(start + offset), directions,
                                       usable[:, mask])
-    solved = unit(solved - offset)
+    solved = np.where(ok[:, None], unit(solved - offset), start)
     log.info("each pixel's normal solved from its own images under the fitted reflectance: %d of %d "
              "pixels, %.2f° from the upsampled fit on average", ok.sum(), ok.size,
              float(angular_error(solved, start).mean()))
