@@ -164,6 +164,21 @@ def test_self_calibration_keeps_its_first_guess_when_the_fit_diverges(glossy, ca
     assert "keeping the first guess" in caplog.text
 
 
+def test_a_fit_that_diverges_between_reads_of_its_loss_is_declined_all_the_same(glossy, monkeypatch):
+    import unps.lights.selfcal as selfcal
+
+    real, calls = selfcal.objective, []
+
+    def diverging(*args):
+        calls.append(1)
+        return real(*args) * (float("nan") if len(calls) == 7 else 1.0)
+
+    monkeypatch.setattr(selfcal, "objective", diverging)
+    start = rotated(glossy, 10)
+    kept, verdict = self_calibrate(glossy, start, SelfCalibration(steps=20, max_pixels=600))
+    assert kept is start and verdict.outcome == "declined" and "diverged" in verdict.reason
+
+
 def test_the_pull_toward_the_network_loosens_where_its_passes_disagree():
     from unps.lights.prior import network_prior
 

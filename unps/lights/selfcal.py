@@ -48,6 +48,7 @@ log = logging.getLogger(__name__)
 MIN_IMAGES = 4
 START_ALBEDO = 0.6   # the images are scaled to a 99th percentile of 1
 MOVED_WARNING = 5.0  # degrees, mean over the lights: the images and the network disagree
+CHECK_EVERY = 100    # steps between reads of the loss (on a GPU each read waits for the device)
 
 
 @dataclass(frozen=True)
@@ -237,7 +238,8 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
         prior: NetworkPrior | None = None, weight: torch.Tensor | None = None) -> tuple[float, float]:
     """Adam on every unknown of the model for ``settings.steps`` steps, the cast shadows marched
     again every ``settings.shadows_every`` steps, the pixels weighted by ``weight`` (m,) where
-    given; stops early on a non-finite loss.
+    given; stops early on a non-finite loss, read every :data:`CHECK_EVERY` steps (a loss that
+    is not finite leaves the parameters so, and the final loss with them).
 
     Returns:
         The objective and the prior's pull at the end, with the shadows of the final depth and
@@ -258,7 +260,7 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
         if every and step % every == 0:
             visible = model.visibility()
         loss, _ = total(visible)
-        if not torch.isfinite(loss):
+        if step % CHECK_EVERY == 0 and not torch.isfinite(loss):
             return loss.item(), float("nan")
         if step % settings.log_every == 0:
             log.info("self-calibration step %d/%d: loss %.4g", step, settings.steps, loss.item())
