@@ -33,8 +33,7 @@ from unps.inverse.control import fingerprint, train
 from unps.inverse.grids import on_subject_grid, unclipped, upsample_map, upsample_with_detail, working_factor
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet
-from unps.inverse.pixels import (neighbour_pairs, noise_variance, normal_variance, refine_pixel_normals,
-                                 shrunk_toward_start, used_values)
+from unps.inverse.pixels import refine_pixel_normals
 from unps.inverse.settings import InterreflectionModel, Preset
 from unps.inverse.system import InverseRendering
 from unps.metrics import angular_error
@@ -146,8 +145,7 @@ def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.n
     The fit renders with the interreflected normals N_ny, not N_o: each pixel is solved for its
     N_ny, starting from the upsampled N_o moved by the fit's N_ny − N_o there, and that offset is
     taken off again (on BrokenPot, whose interreflections bend N_o by 2.6°, solving for N_o
-    directly cost 1.5°). Each solution keeps the share of its move that the images' noise does
-    not explain (:func:`unps.inverse.pixels.shrunk_toward_start`).
+    directly cost 1.5°).
 
     Args:
         cropped: the subject's crop, (H, W) grid; normals: (H, W, 3) the upsampled fit there.
@@ -163,21 +161,13 @@ def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.n
     mask = cropped.mask
     colour = np.stack([upsample_map(r, work_mask, mask.shape, factor)[mask] for r in reflectance])
     colour *= scales[:, None, None]
-    images, start, offset = cropped.images[:, mask], normals[mask], interreflected[mask]
-    rendered_start = unit(start + offset)
-    solved, ok = refine_pixel_normals(images, colour, rendered_start, directions, usable[:, mask])
-    used = used_values(images, colour, rendered_start, solved, directions, usable[:, mask])
-    noise = noise_variance(images, colour, solved, directions, used, neighbour_pairs(mask))
-    # the upsampled fit averaged each pixel's noise with its block's: 1/factor² of it is in both
-    variance = noise * normal_variance(colour, directions, solved, used) * (1 - 1 / factor ** 2)
-    solved, kept = shrunk_toward_start(rendered_start, solved, variance, ok)
+    start, offset = normals[mask], interreflected[mask]
+    solved, ok = refine_pixel_normals(cropped.images[:, mask], colour, unit(start + offset), directions,
+                                      usable[:, mask])
     solved = np.where(ok[:, None], unit(solved - offset), start)
     log.info("each pixel's normal solved from its own images under the fitted reflectance: %d of %d "
-             "pixels, %.2f° from the upsampled fit on average (image noise σ %.2g of the 99th "
-             "percentile; %.0f%% of each move kept on average, the rest taken for noise)", ok.sum(),
-             ok.size, float(angular_error(solved, start).mean()),
-             np.sqrt(noise) / max(float(np.percentile(images, 99)), 1e-12),
-             100 * (kept[ok].mean() if ok.any() else 1.0))
+             "pixels, %.2f° from the upsampled fit on average", ok.sum(), ok.size,
+             float(angular_error(solved, start).mean()))
     refined = normals.copy()
     refined[mask] = solved
     return refined

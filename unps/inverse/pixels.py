@@ -9,17 +9,7 @@ normal is what its own images say under the fit's rendering model,
     I_j(p) ≈ c_j(p) · max(n(p)·l_j, 0),     c_j(p) = scale_j · R_j(p)  (RGB),
 
 solved for n(p) in the L1 sense of the fit's loss, over the images that light the pixel and do not
-leave it in a shadow the model cannot render.
-
-A pixel's own images carry its noise as well as its detail, and a noisy capture's per-pixel
-normals are noisier than the fit's, which averaged neighbours: each solution is taken toward the
-upsampled fit by how much of its difference from it the noise explains (a Wiener shrinkage,
-:func:`shrunk_toward_start`). The noise is measured on the solve's own residuals, differenced
-between neighbouring pixels (:func:`noise_variance`): what the model cannot render (highlights,
-interreflections) varies smoothly across the surface and cancels, while noise does not. On a
-clean capture the solutions stand as solved.
-
-Frame: unps's (x right, y up, z toward the camera).
+leave it in a shadow the model cannot render. Frame: unps's (x right, y up, z toward the camera).
 """
 
 from __future__ import annotations
@@ -33,8 +23,6 @@ LIT = 0.02
 """Images whose light meets the normal at n·l below this are left out (attached shadow)."""
 MIN_IMAGES = 4
 """A pixel with fewer usable images keeps its start."""
-L1_EFFICIENCY = np.pi / 2
-"""Variance of an L1 (median-like) estimate over that of least squares, under Gaussian noise."""
 
 
 def observed_shading(images: np.ndarray, colour: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -90,7 +78,10 @@ def refine_pixel_normals(images: np.ndarray, colour: np.ndarray, normals: np.nda
         solution facing away from the camera (n_z ≤ 0, which no pixel of the object can see).
     """
     shading, weight = observed_shading(images, colour)
-    keep = kept_values(shading, normals, lights, usable)
+    rendered = np.clip(normals @ lights.T, 0, None).T                          # (n, P)
+    keep = (rendered > LIT) & (shading > SHADOW_RATIO * rendered)
+    if usable is not None:
+        keep &= usable
     current = normals
     for step in range(1 + reweightings):
         along = (current @ lights.T).T                                          # (n, P) n·l
@@ -102,113 +93,3 @@ def refine_pixel_normals(images: np.ndarray, colour: np.ndarray, normals: np.nda
         ok = np.isfinite(solved).all(-1) & (facing.sum(0) >= MIN_IMAGES) & (solved[:, 2] > 0)
         current = np.where(ok[:, None], solved, normals)
     return current, ok
-
-
-def kept_values(shading: np.ndarray, normals: np.ndarray, lights: np.ndarray,
-                usable: np.ndarray | None = None) -> np.ndarray:
-    """(n, P) bool: the values a pixel's solve may use — lit under ``normals`` (P, 3), not darker
-    than :data:`SHADOW_RATIO` of what the model renders there (a cast shadow), and ``usable``."""
-    rendered = np.clip(normals @ lights.T, 0, None).T
-    keep = (rendered > LIT) & (shading > SHADOW_RATIO * rendered)
-    return keep & usable if usable is not None else keep
-
-
-def used_values(images: np.ndarray, colour: np.ndarray, start: np.ndarray, solved: np.ndarray,
-                lights: np.ndarray, usable: np.ndarray | None = None) -> np.ndarray:
-    """(n, P) bool: the values the solve of :func:`refine_pixel_normals` from ``start`` ended on
-    at ``solved``."""
-    shading, _ = observed_shading(images, colour)
-    return kept_values(shading, start, lights, usable) & ((solved @ lights.T).T > LIT)
-
-
-def neighbour_pairs(mask: np.ndarray) -> np.ndarray:
-    """(Q, 2) indices, in ``mask``'s row-major order of object pixels, of the pixels side by side
-    or one above the other, both on the object.
-
-    >>> neighbour_pairs(np.array([[True, True], [False, True]])).tolist()
-    [[0, 1], [1, 2]]
-    """
-    index = np.full(mask.shape, -1)
-    index[mask] = np.arange(int(mask.sum()))
-    across = mask[:, :-1] & mask[:, 1:]
-    down = mask[:-1] & mask[1:]
-    return np.concatenate([np.stack([index[:, :-1][across], index[:, 1:][across]], 1),
-                           np.stack([index[:-1][down], index[1:][down]], 1)])
-
-
-def noise_variance(images: np.ndarray, colour: np.ndarray, normals: np.ndarray, lights: np.ndarray,
-                   used: np.ndarray, pairs: np.ndarray) -> float:
-    """The images' noise variance σ² per channel, in image units, read off the per-pixel solve.
-
-    Each used value's residual in image units, |c|·(t − a·n·l) with a the pixel's own scale (its
-    albedo's departure from the fitted reflectance, finer texture among it), holds the noise and
-    what the model cannot render; the second changes little from a pixel to its neighbour, so the
-    difference of two neighbours' residuals under the same image is the noise of both: σ² is half the
-    variance of those differences (from their median absolute value, robust to edges of
-    shadows and highlights), corrected for the three unknowns each pixel's solve fitted.
-
-    Args:
-        images, colour: (n, P, 3) as :func:`refine_pixel_normals` takes them; normals: (P, 3) its
-            solution; lights: (n, 3); used: (n, P) bool, the values it used
-            (:func:`used_values`); pairs: (Q, 2) neighbouring pixels (:func:`neighbour_pairs`).
-
-    Returns:
-        σ², or 0 where fewer than 100 pairs of used values are found.
-    """
-    shading, power = observed_shading(images, colour)
-    along = (normals @ lights.T).T * used                                       # (n, P)
-    scale = (power * shading * along).sum(0) / np.maximum((power * along ** 2).sum(0), 1e-12)
-    residual = power * (shading - scale * along)                                # (n, P)
-    first, second = pairs.T
-    both = used[:, first] & used[:, second]
-    if both.sum() < 100:
-        return 0.0
-    differences = (residual[:, first] - residual[:, second])[both]
-    sigma = 1.4826 * np.median(np.abs(differences)) / np.sqrt(2)                # MAD → σ
-    images_used = used.sum(0)
-    solved = images_used[images_used >= MIN_IMAGES]
-    count = float(np.median(solved)) if solved.size else 0.0
-    return float(sigma ** 2 * count / (count - 3)) if count > 3 else 0.0
-
-
-def normal_variance(colour: np.ndarray, lights: np.ndarray, normals: np.ndarray,
-                    used: np.ndarray) -> np.ndarray:
-    """(P,) the variance (rad², over the two tangent directions) of each pixel's solved normal
-    under image noise of unit variance per channel: the shading t_j of a value has variance
-    1/|c_j|², the solve weighs it by |c_j| (``weighted_normals``), so the least-squares
-    covariance is A⁻¹ (Σ_j l_j l_jᵀ) A⁻¹ with A = Σ_j |c_j| l_j l_jᵀ over the used values; an
-    L1 solve's is :data:`L1_EFFICIENCY` times larger."""
-    power = np.sqrt((colour ** 2).sum(-1)) * used                               # (n, P)
-    spread = np.einsum("jp,ja,jb->pab", power, lights, lights)
-    count = np.einsum("jp,ja,jb->pab", used.astype(np.float64), lights, lights)
-    ridge = (1e-9 * np.einsum("paa->p", spread) + 1e-30)[:, None, None] * np.eye(3)
-    inverse = np.linalg.inv(spread + ridge)
-    covariance = L1_EFFICIENCY * inverse @ count @ inverse
-    return np.einsum("paa->p", covariance) - np.einsum("pa,pab,pb->p", normals, covariance, normals)
-
-
-def shrunk_toward_start(start: np.ndarray, solved: np.ndarray, variance: np.ndarray,
-                        solved_mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each solution taken toward its start by the share of its move the noise explains.
-
-    With d_p = solved_p − start_p, the detail the solutions add has variance s² = mean|d|² −
-    mean v over the solved pixels (the rest of mean|d|² is noise), and each pixel keeps
-    k_p = s² / (s² + v_p) of its move (the least-squares estimate of the detail from d): all of it
-    where its noise variance v_p is small against the detail, little where the noise is all its
-    move holds.
-
-    Args:
-        start, solved: (P, 3) unit normals; variance: (P,) v_p in rad², the noise variance of d_p
-            (the start's own noise, where it shares the solution's, taken off);
-            solved_mask: (P,) bool, the pixels the solve changed (the others keep their start).
-
-    Returns:
-        (P, 3) unit normals, and (P,) k_p (1 where ``solved_mask`` is False).
-    """
-    move = solved - start
-    if not solved_mask.any():
-        return start.copy(), np.ones(len(start))
-    detail = max(float((move[solved_mask] ** 2).sum(1).mean() - variance[solved_mask].mean()), 0.0)
-    keep = np.where(solved_mask, detail / np.maximum(detail + variance, 1e-30), 1.0)
-    moved = start + keep[:, None] * move
-    return moved / np.linalg.norm(moved, axis=-1, keepdims=True), keep
