@@ -15,6 +15,7 @@ from unps.data.checks import clipped_values
 from unps.geometry import continue_surface
 from unps.grid import block_mean
 from unps.fit import fit
+from unps.inverse.pixels import NOISE_LIMIT
 from unps.inverse.fit import (FAR_FROM_START_DEG, build_system, distance_from_start, interreflection_bend,
                               neural_inverse_rendering, solved_per_pixel, unit)
 from unps.inverse.settings import InterreflectionModel, Preset
@@ -475,7 +476,7 @@ def test_each_pixel_is_solved_for_the_normal_the_fit_renders_and_brought_back(ca
 
     def solved(interreflected):
         return solved_per_pixel(subject, sphere.normals, interreflected, reflectance, sphere.light_directions,
-                                np.ones(16, np.float32), coarse, 2, np.ones((16, 24, 24), bool))[sphere.mask]
+                                np.ones(16, np.float32), coarse, 2, np.ones((16, 24, 24), bool))[0][sphere.mask]
 
     truth = sphere.normals[sphere.mask]
     assert angular_error(solved(offset), truth).mean() < 0.3      # the offset is taken off unit vectors
@@ -489,10 +490,39 @@ def test_a_pixel_the_solve_leaves_out_keeps_the_upsampled_fit_exactly():
     sphere = render_lambertian("sphere", size=16, n_lights=8, seed=2)
     offset = np.broadcast_to(np.array([0.2, -0.1, 0.0], np.float32), sphere.normals.shape)
     _, coarse = block_mean(np.zeros((16, 16, 1)), sphere.mask, 2)
-    kept = solved_per_pixel(sphere, sphere.normals, offset, np.ones((8, *coarse.shape, 3), np.float32),
-                            sphere.light_directions, np.ones(8, np.float32), coarse, 2,
-                            np.zeros((8, 16, 16), bool))
+    kept, _ = solved_per_pixel(sphere, sphere.normals, offset, np.ones((8, *coarse.shape, 3), np.float32),
+                               sphere.light_directions, np.ones(8, np.float32), coarse, 2,
+                               np.zeros((8, 16, 16), bool))
     np.testing.assert_array_equal(kept[sphere.mask], sphere.normals[sphere.mask])
+
+
+@pytest.mark.parametrize("sigma, solved", [(0.0, True), (0.3, False)])
+def test_the_images_noise_decides_whether_each_pixel_is_solved(caplog, sigma, solved):
+    """A sphere's normals 6° off: clean images put each pixel right; images with noise of 0.3 of
+    their white level are read as that noisy (as a share of the noisy images' 99th percentile),
+    and the fit's normals are kept, with a warning."""
+    sphere = render_lambertian("sphere", size=32, n_lights=24, seed=4)
+    rng = np.random.default_rng(0)
+    images = sphere.images + rng.normal(0, sigma * np.percentile(sphere.images[:, sphere.mask], 99),
+                                        sphere.images.shape).astype(np.float32) * sphere.mask[None, ..., None]
+    subject = sphere.replace(images=images.astype(np.float32), light_intensities=None)
+    tilt = np.array([np.sin(np.radians(6)), 0, np.cos(np.radians(6))])
+    start = np.where(sphere.mask[..., None], unit(sphere.normals + tilt - [0, 0, 1]), sphere.normals)
+    _, coarse = block_mean(np.zeros((32, 32, 1)), sphere.mask, 2)
+    caplog.set_level("INFO")
+    normals, noise = solved_per_pixel(subject, start.astype(np.float32), np.zeros_like(start),
+                                      np.full((24, *coarse.shape, 3), 0.8, np.float32),   # its albedo
+                                      sphere.light_directions, np.ones(24, np.float32), coarse, 2,
+                                      np.ones((24, 32, 32), bool))
+    error = angular_error(normals, sphere.normals)[sphere.mask].mean()
+    if solved:
+        assert noise < 0.05 and error < 0.5
+    else:
+        added = sigma * np.percentile(sphere.images[:, sphere.mask], 99)    # in image units
+        assert noise * np.percentile(images[:, sphere.mask], 99) == pytest.approx(added, rel=0.2)
+        assert noise > NOISE_LIMIT
+        np.testing.assert_array_equal(normals, start.astype(np.float32))
+        assert "hold more noise than detail" in caplog.text
 
 
 @pytest.mark.parametrize("tilt, warned", [(5.0, False), (30.0, True)])

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from unps.inverse.pixels import refine_pixel_normals
+from unps.inverse.pixels import neighbour_pairs, noise_level, refine_pixel_normals, used_values
 from unps.metrics import angular_error
 
 
@@ -79,3 +79,32 @@ def test_a_solution_facing_away_from_the_camera_keeps_the_start(stack):
     solved, ok = refine_pixel_normals(seen, np.full((12, 1, 3), 0.7), begin, low)
     assert not ok[0]
     np.testing.assert_array_equal(solved, begin)
+
+
+@pytest.fixture
+def dome():
+    """A 32×32 grid of a sphere cap, a textured albedo, 24 lights; a smooth misfit the model does
+    not render (the values up to 25 % brighter toward one side); a start 6° off."""
+    rng = np.random.default_rng(5)
+    y, x = np.mgrid[-1:1:32j, -1:1:32j] * 0.6
+    normals = unit(np.stack([x, y, np.ones_like(x)], -1)).reshape(-1, 3)
+    zenith, azimuth = np.radians(rng.uniform(5, 50, 24)), rng.uniform(0, 2 * np.pi, 24)
+    lights = np.stack([np.sin(zenith) * np.cos(azimuth), np.sin(zenith) * np.sin(azimuth), np.cos(zenith)], -1)
+    colour = np.broadcast_to(rng.uniform(0.4, 0.8, (1024, 3)), (24, 1024, 3)).copy()
+    misfit = (1 + 0.25 * (x.ravel() + 0.6) / 1.2)[None, :, None]
+    images = colour * misfit * np.clip(normals @ lights.T, 0, None).T[..., None]
+    start = unit(normals + 0.1 * unit(np.cross(normals, [0.3, 1.0, 0.0])))
+    return images, colour, lights, start, neighbour_pairs(np.ones((32, 32), bool))
+
+
+def read_noise(images, colour, lights, start, pairs):
+    solved, _ = refine_pixel_normals(images, colour, start, lights)
+    return noise_level(images, colour, solved, lights, used_values(images, colour, start, solved, lights), pairs)
+
+
+@pytest.mark.parametrize("sigma", [0.02, 0.1])
+def test_the_noise_is_read_off_neighbouring_residuals_and_not_off_a_smooth_misfit(dome, sigma):
+    images, colour, lights, start, pairs = dome
+    noisy = images + np.random.default_rng(1).normal(0, sigma, images.shape)
+    assert read_noise(noisy, colour, lights, start, pairs) == pytest.approx(sigma, rel=0.2)
+    assert read_noise(images, colour, lights, start, pairs) < 0.002    # the misfit: residuals ~0.05

@@ -33,7 +33,7 @@ from unps.inverse.control import fingerprint, train
 from unps.inverse.grids import on_subject_grid, unclipped, upsample_map, upsample_with_detail, working_factor
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet
-from unps.inverse.pixels import refine_pixel_normals
+from unps.inverse.pixels import NOISE_LIMIT, neighbour_pairs, noise_level, refine_pixel_normals, used_values
 from unps.inverse.settings import InterreflectionModel, Preset
 from unps.inverse.system import InverseRendering
 from unps.metrics import angular_error
@@ -103,13 +103,15 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
         coarse_init = system.init_normals[0].permute(1, 2, 0).cpu().numpy()
         moved = distance_from_start(normals, coarse_init, work.mask, preset.init)
         directions, scales = rendering["light_directions"], rendering["light_scales"]
+        image_noise = None
         if factor > 1:
             fine_init = initial_estimate(cropped, light_directions, preset.init, device).normals
             upsampled = upsample_with_detail(normals, coarse_init, fine_init, work.mask, factor)
             if preset.refine_pixels:
                 interreflected = upsample_map(pseudo_normals - normals, work.mask, cropped.mask.shape, factor)
-                upsampled = solved_per_pixel(cropped, upsampled, interreflected, rendering["reflectance"],
-                                             directions, scales, work.mask, factor, ~clipped)
+                upsampled, image_noise = solved_per_pixel(cropped, upsampled, interreflected,
+                                                          rendering["reflectance"], directions, scales,
+                                                          work.mask, factor, ~clipped)
             normals = upsampled
         black = black_everywhere(cropped.observed_images(), cropped.mask)
         if preset.continue_black and black.any():
@@ -130,7 +132,7 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
             "interreflection": interreflection.enabled,
             "facet_downsample": solver.factor if solver else None,
             "interreflection_bend_deg": bend["mean"] if bend else None, "moved_from_start_deg": moved,
-            "black_share": black_share}
+            "black_share": black_share, "image_noise": image_noise}
     rendering = Rendering(work.mask, work.images, rendering["reconstruction"], rendering["reflectance"])
     return Estimate(normals, albedo, light_directions=directions if refine_lights else None,
                     light_scales=scales if refine_lights else None, rendering=rendering, info=info)
@@ -156,21 +158,32 @@ def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.n
         usable: (n, H, W) bool, False for the clipped values the fit left out.
 
     Returns:
-        (H, W, 3) unit normals on the crop's object; pixels the solve leaves out keep ``normals``.
+        (H, W, 3) unit normals on the crop's object — pixels the solve leaves out keep
+        ``normals``, and all of them do where the images' noise is above
+        :data:`unps.inverse.pixels.NOISE_LIMIT` — and that noise (σ, a share of the images' 99th
+        percentile; :func:`unps.inverse.pixels.noise_level`).
     """
     mask = cropped.mask
     colour = np.stack([upsample_map(r, work_mask, mask.shape, factor)[mask] for r in reflectance])
     colour *= scales[:, None, None]
-    start, offset = normals[mask], interreflected[mask]
-    solved, ok = refine_pixel_normals(cropped.images[:, mask], colour, unit(start + offset), directions,
-                                      usable[:, mask])
+    images, start, offset = cropped.images[:, mask], normals[mask], interreflected[mask]
+    solved, ok = refine_pixel_normals(images, colour, unit(start + offset), directions, usable[:, mask])
+    used = used_values(images, colour, unit(start + offset), solved, directions, usable[:, mask])
+    white = float(np.percentile(images, 99))
+    noise = noise_level(images, colour, solved, directions, used, neighbour_pairs(mask)) / max(white, 1e-12)
+    if noise > NOISE_LIMIT:
+        log.warning("the images' noise is %.2f of their 99th percentile (above %.2f): each pixel's own "
+                    "images hold more noise than detail, so the normals are the fit's, upsampled "
+                    "(preset.refine_pixels solves each pixel only where the noise allows)", noise,
+                    NOISE_LIMIT)
+        return normals, noise
     solved = np.where(ok[:, None], unit(solved - offset), start)
     log.info("each pixel's normal solved from its own images under the fitted reflectance: %d of %d "
-             "pixels, %.2f° from the upsampled fit on average", ok.sum(), ok.size,
-             float(angular_error(solved, start).mean()))
+             "pixels, %.2f° from the upsampled fit on average (image noise %.3f of the 99th "
+             "percentile)", ok.sum(), ok.size, float(angular_error(solved, start).mean()), noise)
     refined = normals.copy()
     refined[mask] = solved
-    return refined
+    return refined, noise
 
 
 def unit(vectors: np.ndarray) -> np.ndarray:

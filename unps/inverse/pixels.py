@@ -9,7 +9,14 @@ normal is what its own images say under the fit's rendering model,
     I_j(p) ≈ c_j(p) · max(n(p)·l_j, 0),     c_j(p) = scale_j · R_j(p)  (RGB),
 
 solved for n(p) in the L1 sense of the fit's loss, over the images that light the pixel and do not
-leave it in a shadow the model cannot render. Frame: unps's (x right, y up, z toward the camera).
+leave it in a shadow the model cannot render.
+
+A pixel's own images carry its noise as well as its detail. The noise is read off the solve's
+own residuals, differenced between neighbouring pixels (:func:`noise_level`): what the model
+cannot render (highlights, interreflections) changes little from a pixel to the next and
+cancels, noise does not. Where it is above :data:`NOISE_LIMIT`, the caller keeps the fit.
+
+Frame: unps's (x right, y up, z toward the camera).
 """
 
 from __future__ import annotations
@@ -23,6 +30,11 @@ LIT = 0.02
 """Images whose light meets the normal at n·l below this are left out (attached shadow)."""
 MIN_IMAGES = 4
 """A pixel with fewer usable images keeps its start."""
+NOISE_LIMIT = 0.15
+"""Image noise (σ, a share of the images' 99th percentile) above which each pixel's own images
+hold more noise than detail: in the ``noise`` study (``experiments/noise/``) the solve lowered
+the error up to σ = 0.1 (read as 0.12) and raised it by 2° at σ = 0.2 (read as 0.17–0.18); the
+light benchmark's captures read 0.006–0.05, DiLiGenT's cat 0.017."""
 
 
 def observed_shading(images: np.ndarray, colour: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -78,10 +90,7 @@ def refine_pixel_normals(images: np.ndarray, colour: np.ndarray, normals: np.nda
         solution facing away from the camera (n_z ≤ 0, which no pixel of the object can see).
     """
     shading, weight = observed_shading(images, colour)
-    rendered = np.clip(normals @ lights.T, 0, None).T                          # (n, P)
-    keep = (rendered > LIT) & (shading > SHADOW_RATIO * rendered)
-    if usable is not None:
-        keep &= usable
+    keep = kept_values(shading, normals, lights, usable)
     current = normals
     for step in range(1 + reweightings):
         along = (current @ lights.T).T                                          # (n, P) n·l
@@ -93,3 +102,69 @@ def refine_pixel_normals(images: np.ndarray, colour: np.ndarray, normals: np.nda
         ok = np.isfinite(solved).all(-1) & (facing.sum(0) >= MIN_IMAGES) & (solved[:, 2] > 0)
         current = np.where(ok[:, None], solved, normals)
     return current, ok
+
+
+def kept_values(shading: np.ndarray, normals: np.ndarray, lights: np.ndarray,
+                usable: np.ndarray | None = None) -> np.ndarray:
+    """(n, P) bool: the values a pixel's solve may use — lit under ``normals`` (P, 3), not darker
+    than :data:`SHADOW_RATIO` of what the model renders there (a cast shadow), and ``usable``."""
+    rendered = np.clip(normals @ lights.T, 0, None).T
+    keep = (rendered > LIT) & (shading > SHADOW_RATIO * rendered)
+    return keep & usable if usable is not None else keep
+
+
+def used_values(images: np.ndarray, colour: np.ndarray, start: np.ndarray, solved: np.ndarray,
+                lights: np.ndarray, usable: np.ndarray | None = None) -> np.ndarray:
+    """(n, P) bool: the values the solve of :func:`refine_pixel_normals` from ``start`` ended on
+    at ``solved``."""
+    shading, _ = observed_shading(images, colour)
+    return kept_values(shading, start, lights, usable) & ((solved @ lights.T).T > LIT)
+
+
+def neighbour_pairs(mask: np.ndarray) -> np.ndarray:
+    """(Q, 2) indices, in ``mask``'s row-major order of object pixels, of the pixels side by side
+    or one above the other, both on the object.
+
+    >>> neighbour_pairs(np.array([[True, True], [False, True]])).tolist()
+    [[0, 1], [1, 2]]
+    """
+    index = np.full(mask.shape, -1)
+    index[mask] = np.arange(int(mask.sum()))
+    across = mask[:, :-1] & mask[:, 1:]
+    down = mask[:-1] & mask[1:]
+    return np.concatenate([np.stack([index[:, :-1][across], index[:, 1:][across]], 1),
+                           np.stack([index[:-1][down], index[1:][down]], 1)])
+
+
+def noise_level(images: np.ndarray, colour: np.ndarray, normals: np.ndarray, lights: np.ndarray,
+                used: np.ndarray, pairs: np.ndarray) -> float:
+    """The images' noise σ per channel, in image units, read off the per-pixel solve.
+
+    Each used value's residual in image units, |c|·(t − a·n·l) with a the pixel's own scale (its
+    albedo's departure from the fitted reflectance, finer texture among it), holds the noise and
+    what the model cannot render. The second changes little from a pixel to its neighbour, so the
+    difference of two neighbours' residuals under the same image is the noise of both: σ² is half
+    the variance of those differences (from their median absolute value, robust to the edges of
+    shadows and highlights), corrected for the three unknowns each pixel's solve fitted.
+
+    Args:
+        images, colour: (n, P, 3) as :func:`refine_pixel_normals` takes them; normals: (P, 3) its
+            solution; lights: (n, 3); used: (n, P) bool, the values it used
+            (:func:`used_values`); pairs: (Q, 2) neighbouring pixels (:func:`neighbour_pairs`).
+
+    Returns:
+        σ, or 0 where fewer than 100 pairs of used values are found.
+    """
+    shading, power = observed_shading(images, colour)
+    along = (normals @ lights.T).T * used                                       # (n, P)
+    scale = (power * shading * along).sum(0) / np.maximum((power * along ** 2).sum(0), 1e-12)
+    residual = power * (shading - scale * along)                                # (n, P)
+    first, second = pairs.T
+    both = used[:, first] & used[:, second]
+    images_used = used.sum(0)
+    count = float(np.median(images_used[images_used >= MIN_IMAGES])) if both.sum() >= 100 else 0.0
+    if count <= 3:
+        return 0.0
+    differences = (residual[:, first] - residual[:, second])[both]
+    sigma = 1.4826 * np.median(np.abs(differences)) / np.sqrt(2)                # MAD → σ
+    return float(sigma * np.sqrt(count / (count - 3)))
