@@ -34,7 +34,8 @@ class Preset:
             (:func:`unps.geometry.continue_surface`), not the normal network's guess.
         refine_pixels: beyond the paper, a fit on a coarser working grid has each pixel's normal
             on the subject's grid solved against its own images under the fitted reflectance
-            (:func:`unps.inverse.pixels.refine_pixel_normals`); no effect at full resolution.
+            (:func:`unps.inverse.pixels.refine_pixel_normals`), unless the images are too noisy
+            for it (:data:`unps.inverse.pixels.NOISE_LIMIT`); no effect at full resolution.
         schedule: the optimisation's :class:`Schedule`.
     """
 
