@@ -167,8 +167,9 @@ def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.n
     colour = np.stack([upsample_map(r, work_mask, mask.shape, factor)[mask] for r in reflectance])
     colour *= scales[:, None, None]
     images, start, offset = cropped.images[:, mask], normals[mask], interreflected[mask]
-    solved, ok = refine_pixel_normals(images, colour, unit(start + offset), directions, usable[:, mask])
-    used = used_values(images, colour, unit(start + offset), solved, directions, usable[:, mask])
+    rendered_start = unit(start + offset)
+    solved, ok = refine_pixel_normals(images, colour, rendered_start, directions, usable[:, mask])
+    used = used_values(images, colour, rendered_start, solved, directions, usable[:, mask])
     white = float(np.percentile(images, 99))
     noise = noise_level(images, colour, solved, directions, used, neighbour_pairs(mask)) / max(white, 1e-12)
     if noise > NOISE_LIMIT:
