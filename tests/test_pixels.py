@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from unps.inverse.pixels import neighbour_pairs, noise_level, refine_pixel_normals, used_values
+from unps.inverse.pixels import neighbour_pairs, noise_level, refine_pixel_normals
 from unps.metrics import angular_error
 
 
@@ -28,7 +28,7 @@ def stack():
 def test_a_lambertian_stack_gives_each_pixel_its_true_normal(stack):
     images, colour, normals, lights, start = stack
     assert angular_error(start, normals).mean() > 7
-    solved, ok = refine_pixel_normals(images, colour, start, lights)
+    solved, ok, _ = refine_pixel_normals(images, colour, start, lights)
     assert ok.all() and angular_error(solved, normals).max() < 1e-3
 
 
@@ -41,9 +41,9 @@ def test_values_in_a_cast_shadow_and_clipped_values_are_left_out(stack):
     seen = images.copy()
     seen[shadowed] = 0.0
     seen[clipped] *= 0.6                     # a ceiling below the value
-    solved, ok = refine_pixel_normals(seen, colour, start, lights, usable=~clipped)
+    solved, ok, _ = refine_pixel_normals(seen, colour, start, lights, usable=~clipped)
     assert ok.all() and angular_error(solved, normals).max() < 1e-3
-    blind, _ = refine_pixel_normals(seen, colour, start, lights)
+    blind, *_ = refine_pixel_normals(seen, colour, start, lights)
     assert angular_error(blind, normals).mean() > 0.1    # L1 resists them, but not wholly
 
 
@@ -53,8 +53,8 @@ def test_l1_passes_over_a_highlight_that_least_squares_follows(stack):
     brightest = np.argmax(shading, axis=0)
     seen = images.copy()
     seen[brightest, np.arange(200)] *= 2.5     # a highlight the reflectance does not hold
-    least_squares, _ = refine_pixel_normals(seen, colour, start, lights, reweightings=0)
-    l1, _ = refine_pixel_normals(seen, colour, start, lights)
+    least_squares, *_ = refine_pixel_normals(seen, colour, start, lights, reweightings=0)
+    l1, *_ = refine_pixel_normals(seen, colour, start, lights)
     assert angular_error(l1, normals).mean() < 0.5 * angular_error(least_squares, normals).mean()
 
 
@@ -62,7 +62,7 @@ def test_a_pixel_with_too_few_lit_images_keeps_its_start(stack):
     images, colour, normals, lights, start = stack
     seen = images.copy()
     seen[3:, 7] = 0.0                           # pixel 7: three images left
-    solved, ok = refine_pixel_normals(seen, colour, start, lights)
+    solved, ok, _ = refine_pixel_normals(seen, colour, start, lights)
     assert not ok[7] and ok[np.arange(200) != 7].all()
     np.testing.assert_array_equal(solved[7], start[7])
 
@@ -76,7 +76,7 @@ def test_a_solution_facing_away_from_the_camera_keeps_the_start(stack):
     away = unit(np.array([1.0, 0.0, -0.15]))
     seen = 0.7 * np.clip(low @ away, 0, None)[:, None, None] * np.ones((1, 1, 3))
     begin = unit(np.array([[1.0, 0.0, 0.2]]))
-    solved, ok = refine_pixel_normals(seen, np.full((12, 1, 3), 0.7), begin, low)
+    solved, ok, _ = refine_pixel_normals(seen, np.full((12, 1, 3), 0.7), begin, low)
     assert not ok[0]
     np.testing.assert_array_equal(solved, begin)
 
@@ -98,8 +98,8 @@ def dome():
 
 
 def read_noise(images, colour, lights, start, pairs):
-    solved, _ = refine_pixel_normals(images, colour, start, lights)
-    return noise_level(images, colour, solved, lights, used_values(images, colour, start, solved, lights), pairs)
+    solved, _, used = refine_pixel_normals(images, colour, start, lights)
+    return noise_level(images, colour, solved, lights, used, pairs)
 
 
 @pytest.mark.parametrize("sigma", [0.02, 0.1])

@@ -33,7 +33,7 @@ from unps.inverse.control import fingerprint, train
 from unps.inverse.grids import on_subject_grid, unclipped, upsample_map, upsample_with_detail, working_factor
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet
-from unps.inverse.pixels import NOISE_LIMIT, neighbour_pairs, noise_level, refine_pixel_normals, used_values
+from unps.inverse.pixels import NOISE_LIMIT, neighbour_pairs, noise_level, refine_pixel_normals
 from unps.inverse.settings import InterreflectionModel, Preset
 from unps.inverse.system import InverseRendering
 from unps.metrics import angular_error
@@ -167,9 +167,7 @@ def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.n
     colour = np.stack([upsample_map(r, work_mask, mask.shape, factor)[mask] for r in reflectance])
     colour *= scales[:, None, None]
     images, start, offset = cropped.images[:, mask], normals[mask], interreflected[mask]
-    rendered_start = unit(start + offset)
-    solved, ok = refine_pixel_normals(images, colour, rendered_start, directions, usable[:, mask])
-    used = used_values(images, colour, rendered_start, solved, directions, usable[:, mask])
+    solved, ok, used = refine_pixel_normals(images, colour, unit(start + offset), directions, usable[:, mask])
     white = float(np.percentile(images, 99))
     noise = noise_level(images, colour, solved, directions, used, neighbour_pairs(mask)) / max(white, 1e-12)
     if noise > NOISE_LIMIT:

@@ -71,7 +71,7 @@ def weighted_normals(shading: np.ndarray, weight: np.ndarray, lights: np.ndarray
 
 def refine_pixel_normals(images: np.ndarray, colour: np.ndarray, normals: np.ndarray, lights: np.ndarray,
                          usable: np.ndarray | None = None,
-                         reweightings: int = 3) -> tuple[np.ndarray, np.ndarray]:
+                         reweightings: int = 3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each pixel's normal under the fitted reflectance, from its own images (L1, by iteratively
     reweighted least squares), starting from ``normals``.
 
@@ -85,9 +85,10 @@ def refine_pixel_normals(images: np.ndarray, colour: np.ndarray, normals: np.nda
         reweightings: L1 reweightings after the least-squares solve.
 
     Returns:
-        (P, 3) unit normals, and (P,) bool: the pixels solved. The others keep their start: fewer
+        (P, 3) unit normals; (P,) bool, the pixels solved (the others keep their start: fewer
         than :data:`MIN_IMAGES` usable images, lights that do not span three directions, or a
-        solution facing away from the camera (n_z ≤ 0, which no pixel of the object can see).
+        solution facing away from the camera, n_z ≤ 0, which no pixel of the object can see); and
+        (n, P) bool, the values the solution stands on (kept, and lit under it).
     """
     shading, weight = observed_shading(images, colour)
     keep = kept_values(shading, normals, lights, usable)
@@ -101,7 +102,7 @@ def refine_pixel_normals(images: np.ndarray, colour: np.ndarray, normals: np.nda
         solved = weighted_normals(shading, w, lights)
         ok = np.isfinite(solved).all(-1) & (facing.sum(0) >= MIN_IMAGES) & (solved[:, 2] > 0)
         current = np.where(ok[:, None], solved, normals)
-    return current, ok
+    return current, ok, keep & ((current @ lights.T).T > LIT)
 
 
 def kept_values(shading: np.ndarray, normals: np.ndarray, lights: np.ndarray,
@@ -111,14 +112,6 @@ def kept_values(shading: np.ndarray, normals: np.ndarray, lights: np.ndarray,
     rendered = np.clip(normals @ lights.T, 0, None).T
     keep = (rendered > LIT) & (shading > SHADOW_RATIO * rendered)
     return keep & usable if usable is not None else keep
-
-
-def used_values(images: np.ndarray, colour: np.ndarray, start: np.ndarray, solved: np.ndarray,
-                lights: np.ndarray, usable: np.ndarray | None = None) -> np.ndarray:
-    """(n, P) bool: the values the solve of :func:`refine_pixel_normals` from ``start`` ended on
-    at ``solved``."""
-    shading, _ = observed_shading(images, colour)
-    return kept_values(shading, start, lights, usable) & ((solved @ lights.T).T > LIT)
 
 
 def neighbour_pairs(mask: np.ndarray) -> np.ndarray:
@@ -149,8 +142,8 @@ def noise_level(images: np.ndarray, colour: np.ndarray, normals: np.ndarray, lig
 
     Args:
         images, colour: (n, P, 3) as :func:`refine_pixel_normals` takes them; normals: (P, 3) its
-            solution; lights: (n, 3); used: (n, P) bool, the values it used
-            (:func:`used_values`); pairs: (Q, 2) neighbouring pixels (:func:`neighbour_pairs`).
+            solution; lights: (n, 3); used: (n, P) bool, the values it stands on (its third
+            output); pairs: (Q, 2) neighbouring pixels (:func:`neighbour_pairs`).
 
     Returns:
         σ, or 0 where fewer than 100 pairs of used values are found.
