@@ -17,7 +17,7 @@ from unps.io.images import read_image, write_png16
 from unps.lightnet import lathe
 from unps.lightnet.brdf import NeuralBRDF
 from unps.lightnet.materials import MaterialBank
-from unps.lightnet.rig import FORMATS, LAYOUTS, Camera, draw_lights, expose, noise_on, quantize, record
+from unps.lightnet.rig import FORMATS, LAYOUTS, Camera, draw_lights, expose, quantize, record, stack_noise
 from unps.lightnet.shapes import SHAPES, sample_generator
 from unps.lightnet.data import Draws, LightData, loader_workers
 from unps.lightnet.synthesis import LightDataset, SceneBatch, map_tensors, render, render_batch
@@ -249,7 +249,7 @@ def test_the_gpu_route_of_the_training_loader_taken_on_the_cpu():
     data = LightData(cfg.recipe, cfg.data, cfg.seed, device=torch.device("cuda"))   # a name only
     data.setup("fit")
     draws = next(iter(data.train_dataloader()))
-    assert isinstance(draws, SceneBatch) and all(isinstance(e.noise, int) for e in draws.exposures)
+    assert isinstance(draws, SceneBatch) and all(isinstance(seed, int) for seed in draws.exposures.noise)
     batch = data.transfer_batch_to_device(draws, torch.device("cpu"), 0)
     assert batch["images"].shape == (3, 4, 3, 32, 32) and batch["family"].shape == (3,)
     assert torch.isfinite(batch["images"]).all() and batch["images"].max() <= 1 + 0.5 / 255   # floor8 reads k + ½
@@ -318,8 +318,10 @@ def test_noise_left_to_the_renderer_keeps_every_other_draw_of_the_camera():
     left = expose(camera, shape, sample_generator(0, 5), defer_noise=True)
     assert (left.gain, left.shot, left.read) == (drawn.gain, drawn.shot, drawn.read)
     assert isinstance(left.noise, int) and left.storage in FORMATS
-    noise = noise_on(left, torch.Size(shape), torch.device("cpu"))
-    assert torch.equal(noise, noise_on(left, torch.Size(shape), torch.device("cpu")))   # its seed's
+    noise = stack_noise((left.noise, 3), torch.Size(shape), torch.device("cpu"))
+    fresh = torch.randn(shape, generator=torch.Generator().manual_seed(left.noise))
+    assert torch.equal(noise[0], fresh) and torch.equal(noise[1], stack_noise((3,), shape, torch.device("cpu"))[0])
+    noise = noise[0]
     assert abs(float(noise.mean())) < 0.05 and abs(float(noise.std()) - 1) < 0.05
     images = torch.rand(shape) * 0.5
     assert torch.equal(record(images, left), record(images, left))
@@ -348,5 +350,6 @@ def test_a_sample_rendered_on_a_gpu_is_the_cpu_sample_to_float_rounding():
     assert_same_stacks(batch["images"].cpu(), alone.cpu())
     pinned = SceneBatch.of(scenes).pin_memory()
     assert pinned.normals.is_pinned() and pinned.shadows.depth.is_pinned() and pinned.lobes.diffuse.is_pinned()
+    assert pinned.exposures.gain.is_pinned() and pinned.exposures.picks[1].is_pinned()
     again = render_batch(pinned, torch.device("cuda"))
     assert all(torch.equal(again[key], batch[key]) for key in batch)

@@ -311,11 +311,19 @@ def plan_shadows(depth: torch.Tensor, mask: torch.Tensor, lights: torch.Tensor, 
                       rise.flatten(), distance, int(distance[-1]) + 2, pitch)
 
 
-def march_shadows(plan: ShadowPlan, device: torch.device, budget: int = 2 ** 24) -> torch.Tensor:
+MARCH_BUDGET = {"cpu": 2 ** 24, "cuda": 2 ** 26}
+"""Ray samples (pairs × samples × pixels) :func:`march_shadows` takes at once, by device type: on
+a GPU each chunk is a dozen kernels whose launches, not their work, set the time, so it takes
+larger ones (about 1.5 GB of temporaries)."""
+
+
+def march_shadows(plan: ShadowPlan, device: torch.device, budget: int | None = None) -> torch.Tensor:
     """(B, n, H, W) bool on ``device``: :func:`cast_shadows` of each of the plan's images, all
-    marched as one queue of kernels, ``budget`` samples (pairs × steps × pixels) at a time."""
+    marched as one queue of kernels, at most ``budget`` samples (pairs × samples × pixels) at a
+    time (None: :data:`MARCH_BUDGET` of the device's type, that of ``cuda`` for any other)."""
     b, h, w = plan.depth.shape
     pairs, border = len(plan.order), plan.border
+    budget = budget or MARCH_BUDGET.get(device.type, MARCH_BUDGET["cuda"])
     to = lambda x: x.to(device, non_blocking=True)     # noqa: E731
     depth, mask = to(plan.depth), to(plan.mask)
     surface = F.pad(torch.where(mask, depth, -torch.inf), (border,) * 4, value=-torch.inf)
@@ -325,14 +333,33 @@ def march_shadows(plan: ShadowPlan, device: torch.device, budget: int = 2 ** 24)
     rows, cols = (g.flatten().float() for g in torch.meshgrid(
         torch.arange(h, device=device), torch.arange(w, device=device), indexing="ij"))
     out = torch.zeros(pairs, h * w, dtype=torch.bool, device=device)
-    chunk = max(1, budget // (len(plan.distance) * h * w))
     samples = plan.samples.tolist()
-    for first in range(0, pairs, chunk):
-        count = samples[min(first + chunk, pairs) - 1]       # the chunk's longest reach
-        if not count:
-            continue
-        index = order[first:first + chunk]
+    for first, end in march_chunks(samples, h * w, budget):
+        count = samples[end - 1]                       # the chunk's longest reach
+        index = order[first:end]
         image = index // (pairs // b)
         out[index] = occluded(surface, w + 2 * border, border, rows, cols, start[image], distance[:count],
                               plan.pitch, step[index], rise[index], (image * padded)[:, None, None])
     return out.view(b, pairs // b, h, w) & mask[:, None]
+
+
+def march_chunks(samples: list[int], pixels: int, budget: int) -> list[tuple[int, int]]:
+    """The pairs marched together: [first, end) ranges of the plan's order, each as long as its
+    pairs × its longest reach × ``pixels`` stays within ``budget`` (one pair at least); pairs
+    that need no sample are left out.
+
+    Args:
+        samples: each pair's samples, in the plan's order (non-decreasing).
+
+    Example:
+        >>> march_chunks([0, 0, 1, 2, 2, 5], pixels=1, budget=4)
+        [(2, 4), (4, 5), (5, 6)]
+    """
+    chunks, first = [], next((i for i, count in enumerate(samples) if count), len(samples))
+    while first < len(samples):
+        end = first + 1
+        while end < len(samples) and (end + 1 - first) * samples[end] * pixels <= budget:
+            end += 1
+        chunks.append((first, end))
+        first = end
+    return chunks

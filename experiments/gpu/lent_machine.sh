@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# One call on a lent GPU machine (a bare CUDA image without ../shared), about 8 minutes: the CUDA
-# tests, the training loop's parts timed by hand (the loader pinned and not), the training and data
-# rows, the paper preset and the default command, where a training process spends its time; every
-# line also lands in $OUT/log.
+# One call on a lent GPU machine (a bare CUDA image without ../shared), about 7 minutes: the CUDA
+# tests, the training and data rows, the default command, where training and a fit wait for the
+# GPU, the paper preset's step in variants, and the paper preset's fit of cat; every line also
+# lands in $OUT/log, with each part's seconds.
 #   here:   bash ../shared/tools/gpu-prep.sh          (packs .gpu/: wheels and two DiLiGenT crops)
 #   there:  bash experiments/gpu/lent_machine.sh       (with .gpu/ carried along; writes under $OUT)
 set -u
@@ -14,10 +14,18 @@ export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1
 mkdir -p .gpu/diligent && ln -sfn "$PWD/.gpu/data" .gpu/diligent/pmsData_crop
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader
 gpu="python3 experiments/gpu/run.py --out $out --diligent .gpu/diligent"
-timeout 120 python3 -m pytest -q -p no:cacheprovider tests/test_device.py tests/test_training_data.py \
+part() {   # part <seconds> <label> <command…>: run it within the limit, say how long it took
+  local limit=$1 label=$2; shift 2
+  local start=$SECONDS
+  timeout "$limit" "$@"
+  echo "[$label: $((SECONDS - start)) s, exit $?]"
+}
+part 100 tests python3 -m pytest -q -p no:cacheprovider tests/test_device.py tests/test_training_data.py \
   tests/test_geometry.py 2>&1 | tail -3
-timeout 120 $gpu --rows loop --train-steps 30 2>&1 | grep "^|"
-timeout 150 $gpu --rows train data 2>&1 | grep "^|"
-timeout 200 $gpu --rows paper default --subjects cat 2>&1 | grep "^|"
-timeout 60 $gpu --rows profile --train-steps 40 2>&1 | grep -A30 "Ordered by"
-timeout 120 $gpu --rows paper --subjects pot1 2>&1 | grep "^|"
+part 150 "train, data" $gpu --rows train data 2>&1 | grep "^|\|^\["
+part 100 default $gpu --rows default --subjects cat 2>&1 | grep "^|\|^\["
+part 100 syncs $gpu --rows syncs --train-steps 20 2>&1 | grep "^|\|^\["
+part 80 fitstep $gpu --rows fitstep --subjects cat 2>&1 | grep -v "^  running\|^machine\|self.log"
+part 120 paper $gpu --rows paper --subjects cat 2>&1 | grep "^|\|^\["
+# what comes back: the log, each run's metrics.json and fit.log, not its checkpoints and arrays
+find "$out" \( -name "*.ckpt" -o -name "*.npy" -o -name "*.ply" -o -name "events.out.*" \) -delete

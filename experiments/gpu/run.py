@@ -233,6 +233,110 @@ def profile_training(device: str, steps: int, workers: int | None, out: Path, to
     pstats.Stats(profiler).sort_stats("tottime").print_stats(top)
 
 
+def fit_step_times(name: str, diligent: Path, device: str, steps: int) -> dict[str, float]:
+    """ms per step of ``preset=paper light=gt``'s fit of subject ``name`` (full resolution, all its
+    images, the interreflection solve and cast shadows as at step 0), without Lightning, each
+    variant waited for on the device: as the fit runs it, with ``cudnn.benchmark``, and its two
+    networks under bf16 autocast (the physics in float32). Prints the profiler's twelve costliest GPU
+    operators of the plain step."""
+    from hydra import compose, initialize_config_module
+    from hydra.utils import instantiate
+
+    from unps.inverse.fit import CROP_MARGIN, build_system
+
+    with initialize_config_module("unps.conf", version_base="1.3"):
+        cfg = compose("fit", overrides=[*subject_overrides(name, diligent), "preset=paper", "light=gt"])
+    subject = instantiate(cfg.subject, _partial_=True)().crop_to_mask(CROP_MARGIN)
+    preset, interreflection = instantiate(cfg.preset), instantiate(cfg.interreflection)
+    where = resolve_device(device)
+    system, _ = build_system(subject, subject.light_directions, preset, interreflection, False, "", None,
+                             where)
+    system = system.to(where)
+    system.on_train_batch_start(None, 0)
+    optimiser = system.configure_optimizers()["optimizer"]
+
+    def step() -> None:
+        loss = system.training_step(None, 0)
+        loss.backward()
+        optimiser.step()
+        optimiser.zero_grad()
+
+    def ms() -> float:
+        for _ in range(3):
+            step()
+        synchronize(where)
+        start = time.perf_counter()
+        for _ in range(steps):
+            step()
+        synchronize(where)
+        return 1e3 * (time.perf_counter() - start) / steps
+
+    times = {"as run": ms()}
+    if where.type == "cuda":
+        from torch.profiler import ProfilerActivity, profile
+
+        with profile(activities=[ProfilerActivity.CPU, ProfilerActivity.CUDA]) as trace:
+            for _ in range(5):
+                step()
+            synchronize(where)
+        print(trace.key_averages().table(sort_by="self_cuda_time_total", row_limit=12), flush=True)
+        torch.backends.cudnn.benchmark = True
+        times["cudnn.benchmark"] = ms()
+        torch.backends.cudnn.benchmark = False
+    for net in (system.normal_net, system.reflectance_net):
+        net.forward = in_bf16(net.forward, where)
+    times["networks in bf16 autocast"] = ms()
+    return times
+
+
+def in_bf16(forward, device: torch.device):
+    """``forward`` under bf16 autocast on ``device``, its tensors handed back in float32."""
+    def wrapped(*args):
+        with torch.autocast(device.type, dtype=torch.bfloat16):
+            out = forward(*args)
+        return tuple(t.float() for t in out) if isinstance(out, tuple) else out.float()
+    return wrapped
+
+
+def synchronising_calls(device: str, diligent: Path, out: Path, steps: int) -> list[tuple[str, int]]:
+    """Where the training process and a fit wait for the GPU: ``recipe=paper`` training and
+    ``preset=paper light=gt`` on cat, ``steps`` steps each, in this process under
+    ``torch.cuda.set_sync_debug_mode("warn")``; each place (file:line of unps or Lightning) with
+    its count."""
+    import warnings
+    from collections import Counter
+
+    from hydra import compose, initialize_config_module
+
+    from unps.pipeline import fit
+    from unps.train import train
+
+    places: Counter = Counter()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        watched = device.startswith("cuda")      # on a CPU: the same runs, nothing to watch
+        if watched:
+            torch.cuda.set_sync_debug_mode("warn")
+        try:
+            train(paper_config(f"recipe.max_steps={steps}", f"recipe.val_every={steps}",
+                               "recipe.val_samples=32", f"device={device}",
+                               f"paths.output_dir={out / 'syncs-train'}"))
+            with initialize_config_module("unps.conf", version_base="1.3"):
+                cfg = compose("fit", overrides=[*subject_overrides("cat", diligent), "preset=paper",
+                                                "light=gt", f"preset.steps={steps}",
+                                                f"preset.update_every={steps}", f"preset.lr_drop_at={steps}",
+                                                f"device={device}",
+                                                f"paths.output_dir={out / 'syncs-fit'}"])
+            fit(cfg)
+        finally:
+            if watched:
+                torch.cuda.set_sync_debug_mode(0)
+    for warning in caught:
+        if "synchroniz" in str(warning.message):
+            places[f"{Path(warning.filename).name}:{warning.lineno}"] += 1
+    return places.most_common()
+
+
 def paper_data(device: str, *overrides: str) -> tuple:
     """``recipe=paper``'s config (with ``overrides``) and its training data for ``device``, set up."""
     cfg = paper_config(*overrides)
@@ -266,10 +370,11 @@ def main() -> None:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--device", default="cuda")
     parser.add_argument("--out", type=Path, default=Path("runs/gpu"))
-    parser.add_argument("--rows", nargs="+", default=list(ROWS[:-2]), choices=ROWS,
-                        help="which rows to run; 'loop' and 'profile' (not run by default) time the "
-                             "training loop's parts by hand and print where a short training run's "
-                             "process spends its time")
+    parser.add_argument("--rows", nargs="+", default=list(ROWS[:4]), choices=ROWS,
+                        help="which rows to run; the others (not run by default) time the training "
+                             "loop's parts by hand (loop), the paper preset's step in variants "
+                             "(fitstep), list where training and a fit wait for the GPU (syncs), and "
+                             "print where a short training run's process spends its time (profile)")
     parser.add_argument("--subjects", nargs="+", default=["cat", "pot1"])
     parser.add_argument("--default-subject", default="cat", help="the subject of the default command")
     parser.add_argument("--steps", type=int, default=1000, help="steps of the paper-preset fits")
@@ -343,11 +448,25 @@ def main() -> None:
                   f"loader {parts['wait']:.0f} ms, rendering {parts['render']:.0f} ms, the network's step "
                   f"{parts['step']:.0f} ms; {parts['samples_per_s']:.1f} samples/s unwaited |", flush=True)
 
+    if "fitstep" in args.rows:
+        for name in args.subjects[:1]:
+            steps = min(args.steps, 30)
+            times = fit_step_times(name, args.diligent, args.device, steps)
+            print(f"| paper preset's step alone, {name} ({steps} steps, no Lightning) | – | – | – | "
+                  f"{'; '.join(f'{k} {v:.1f}' for k, v in times.items())} ms a step |", flush=True)
+
+    if "syncs" in args.rows:
+        steps = min(args.train_steps, 20)
+        places = synchronising_calls(args.device, args.diligent, args.out, steps)
+        print(f"| where {steps} training steps and a {steps}-step paper fit of cat wait for the GPU "
+              f"| – | – | – | "
+              f"{'; '.join(f'{place} ×{count}' for place, count in places) or 'nowhere'} |", flush=True)
+
     if "profile" in args.rows:
         profile_training(args.device, args.train_steps, args.workers, args.out / "profile")
 
 
-ROWS = ("paper", "default", "train", "data", "loop", "profile")
+ROWS = ("paper", "default", "train", "data", "loop", "fitstep", "syncs", "profile")
 
 
 if __name__ == "__main__":

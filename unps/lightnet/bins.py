@@ -36,10 +36,11 @@ def angles_to_direction(azimuth: torch.Tensor, elevation: torch.Tensor) -> torch
     return torch.stack([c * torch.sin(azimuth), torch.sin(elevation), c * torch.cos(azimuth)], -1)
 
 
-def bin_centres(count: int, low: float, high: float) -> torch.Tensor:
-    """(count,) centres of ``count`` equal bins over [low, high]."""
+def bin_centres(count: int, low: float, high: float, device: torch.device | None = None) -> torch.Tensor:
+    """(count,) float32 centres of ``count`` equal bins over [low, high], made on ``device`` (a
+    GPU copying them from the CPU at every training step would wait for its queue each time)."""
     width = (high - low) / count
-    return low + width * (torch.arange(count, dtype=torch.float32) + 0.5)
+    return low + width * (torch.arange(count, dtype=torch.float32, device=device) + 0.5)
 
 
 def to_bin(values: torch.Tensor, count: int, low: float, high: float) -> torch.Tensor:
@@ -51,7 +52,7 @@ def to_bin(values: torch.Tensor, count: int, low: float, high: float) -> torch.T
 def decode(logits: torch.Tensor, low: float, high: float, soft: bool) -> torch.Tensor:
     """(..., count) logits → (...) values: the arg-max bin's centre, or the soft-arg-max
     (softmax-weighted mean of the centres, as GCNet decodes)."""
-    centres = bin_centres(logits.shape[-1], low, high).to(logits)
+    centres = bin_centres(logits.shape[-1], low, high, logits.device).to(logits.dtype)
     if soft:
         return (torch.softmax(logits, -1) * centres).sum(-1)
     return centres[logits.argmax(-1)]

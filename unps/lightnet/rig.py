@@ -121,7 +121,7 @@ class Exposure:
         gain: the factor that brings the stack's 99th percentile to its level.
         shot, read: this stack's photon-noise factor and read-noise σ.
         noise: (n, 3, H, W) standard normal draws, or the seed of a generator that draws them on
-            the device that records the stack (:func:`noise_on`).
+            the device that records the stack (:func:`stack_noise`).
         storage: one of :data:`FORMATS`.
     """
 
@@ -153,43 +153,74 @@ def expose(camera: Camera, shape: tuple[int, ...], generator: torch.Generator,
     return Exposure(gain, shot, read, noise, storage)
 
 
+@dataclass(frozen=True)
+class Exposures:
+    """B stacks' camera draws (:class:`Exposure`) packed as a few tensors, so that a worker hands
+    them over with its batch and the device recording them makes none of its own.
+
+    Attributes:
+        gain, shot, read_variance: (B,) float32: each stack's gain, photon-noise factor and read
+            noise σ².
+        noise: each stack's (n, 3, H, W) standard normal draws or its seed (:func:`stack_noise`).
+        picks: one (k,) int64 tensor per entry of :data:`FORMATS`: the stacks stored in it.
+    """
+
+    gain: torch.Tensor
+    shot: torch.Tensor
+    read_variance: torch.Tensor
+    noise: tuple[torch.Tensor | int, ...]
+    picks: tuple[torch.Tensor, ...]
+
+    @classmethod
+    def of(cls, exposures: list[Exposure]) -> Exposures:
+        """The draws of ``exposures``, packed."""
+        values = lambda numbers: torch.tensor(numbers, dtype=torch.float32)   # noqa: E731
+        return cls(values([e.gain for e in exposures]), values([e.shot for e in exposures]),
+                   values([e.read ** 2 for e in exposures]), tuple(e.noise for e in exposures),
+                   tuple(torch.tensor([i for i, e in enumerate(exposures) if e.storage == storage],
+                                      dtype=torch.int64) for storage in FORMATS))
+
+
 def record(images: torch.Tensor, exposure: Exposure) -> torch.Tensor:
     """One (n, 3, H, W) stack as the camera stores it (:func:`record_batch` of one)."""
-    return record_batch(images[None], [exposure])[0]
+    return record_batch(images[None], Exposures.of([exposure]))[0]
 
 
-def noise_on(exposure: Exposure, shape: torch.Size, device: torch.device) -> torch.Tensor:
-    """The exposure's standard normal noise of ``shape`` on ``device``: its draws moved there, or
-    drawn there from its seed (the same numbers on every run of one kind of device; a CPU and a
-    GPU draw different ones)."""
-    if isinstance(exposure.noise, torch.Tensor):
-        return to_device(exposure.noise, device)
-    generator = torch.Generator(device).manual_seed(exposure.noise)
-    return torch.randn(shape, generator=generator, device=device)
+def stack_noise(noise: tuple[torch.Tensor | int, ...], shape: torch.Size,
+                device: torch.device) -> torch.Tensor:
+    """(B, *shape) standard normal draws on ``device``: each stack's draws moved there, or drawn
+    there from a generator seeded with its seed (the same numbers on every run of one kind of
+    device; a CPU and a GPU draw different ones). One generator is seeded anew for each such
+    stack, which draws what a fresh one would."""
+    generator, stacks = None, []
+    for draws in noise:
+        if isinstance(draws, torch.Tensor):
+            stacks.append(to_device(draws, device))
+            continue
+        generator = generator or torch.Generator(device)
+        stacks.append(torch.randn(shape, generator=generator.manual_seed(draws), device=device))
+    return torch.stack(stacks)
 
 
-def record_batch(images: torch.Tensor, exposures: list[Exposure]) -> torch.Tensor:
+def record_batch(images: torch.Tensor, exposures: Exposures) -> torch.Tensor:
     """Stacks scaled to a 99th percentile of 1, as the camera stores them.
 
     Args:
         images: (B, n, 3, H, W) radiance, each stack's 99th percentile of the object's values 1,
             on any device.
-        exposures: the camera's draws for each stack (:func:`expose`); their noise is moved to, or
-            drawn on, the images' device (:func:`noise_on`).
+        exposures: the camera's draws for each stack, packed (:class:`Exposures`); their noise is
+            moved to, or drawn on, the images' device.
 
     Returns:
         (B, n, 3, H, W) in [0, 1]: exposed, noisy, clipped at full scale and quantised.
     """
     device, shape = images.device, images.shape[1:]
-    per_stack = lambda values: to_device(torch.tensor(values, dtype=torch.float32),   # noqa: E731
-                                         device).view(-1, 1, 1, 1, 1)
-    values = images * per_stack([e.gain for e in exposures])
-    sigma = torch.sqrt(per_stack([e.shot for e in exposures]) * values.clamp_min(0)
-                       + per_stack([e.read ** 2 for e in exposures]))
-    noise = torch.stack([noise_on(e, shape, device) for e in exposures])
-    values = (values + sigma * noise).clamp(0, 1)
-    storages = [e.storage for e in exposures]
-    for storage in set(storages) - {"float"}:
-        pick = to_device(torch.tensor([i for i, s in enumerate(storages) if s == storage]), device)
-        values[pick] = quantize(values[pick], storage)
+    per_stack = lambda values: to_device(values, device).view(-1, 1, 1, 1, 1)   # noqa: E731
+    values = images * per_stack(exposures.gain)
+    sigma = torch.sqrt(per_stack(exposures.shot) * values.clamp_min(0) + per_stack(exposures.read_variance))
+    values = (values + sigma * stack_noise(exposures.noise, shape, device)).clamp(0, 1)
+    for storage, pick in zip(FORMATS, exposures.picks):
+        if storage != "float" and len(pick):
+            pick = to_device(pick, device)
+            values[pick] = quantize(values[pick], storage)
     return values

@@ -24,7 +24,7 @@ from unps.errors import InputError
 from unps.geometry import ShadowPlan, march_shadows
 from unps.lightnet.brdf import AnalyticBRDF
 from unps.lightnet.materials import FAMILIES, LobeTable, MaterialBank, painted, shade, shade_batch
-from unps.lightnet.rig import LAYOUTS, Camera, Exposure, draw_lights, expose, record, record_batch
+from unps.lightnet.rig import LAYOUTS, Camera, Exposure, Exposures, draw_lights, expose, record, record_batch
 from unps.lightnet.shapes import SHAPES, ShapeMaps, check_weights, draw_shape, plan_shadows, sample_generator
 
 LEVEL_SAMPLES = 8192
@@ -197,10 +197,10 @@ class SceneBatch:
         shadows: the shadow march, the (B, H, W) depth and mask within.
         level_index, level_valid: (B, L) which values of each stack set its level
             (:func:`level_picks`).
-        lobes: the analytic materials; others: the other materials, by sample; families: each
-            sample's material family.
-        exposures: the camera's draws (or None); saturation, perturbation: (B, n, 3, H, W) the
-            paper's noise otherwise.
+        lobes: the analytic materials; others: the other materials, by sample; family: (B,) each
+            sample's material family, its index in :data:`~unps.lightnet.materials.FAMILIES`.
+        exposures: the camera's draws, packed (or None); saturation, perturbation: (B, n, 3, H, W)
+            the paper's noise otherwise.
     """
 
     normals: torch.Tensor
@@ -212,8 +212,8 @@ class SceneBatch:
     level_valid: torch.Tensor
     lobes: LobeTable
     others: dict[int, torch.nn.Module]
-    families: tuple[str, ...]
-    exposures: tuple[Exposure, ...] | None
+    family: torch.Tensor
+    exposures: Exposures | None
     saturation: float | None
     perturbation: torch.Tensor | None
 
@@ -238,8 +238,8 @@ class SceneBatch:
                    *level_picks(mask, lights.shape[1]),
                    LobeTable.of(brdfs),
                    {i: brdf for i, brdf in enumerate(brdfs) if not isinstance(brdf, AnalyticBRDF)},
-                   tuple(scene.family for scene in scenes),
-                   tuple(scene.exposure for scene in scenes) if camera else None,
+                   torch.tensor([FAMILIES.index(scene.family) for scene in scenes]),
+                   Exposures.of([scene.exposure for scene in scenes]) if camera else None,
                    scenes[0].saturation,
                    None if camera else torch.stack([scene.perturbation for scene in scenes]))
 
@@ -258,7 +258,7 @@ def render_batch(batch: SceneBatch, device: torch.device) -> dict[str, torch.Ten
                          to(batch.intensities), to(batch.albedo), march_shadows(batch.shadows, device))
     images = images / stack_levels(images, to(batch.level_index), to(batch.level_valid))
     if batch.exposures is not None:
-        images = record_batch(images, list(batch.exposures))
+        images = record_batch(images, batch.exposures)
     else:
         if batch.saturation is not None:
             images = images.clamp(max=batch.saturation)
@@ -266,7 +266,7 @@ def render_batch(batch: SceneBatch, device: torch.device) -> dict[str, torch.Ten
     mask = mask[:, None]
     return {"images": images * mask[:, None], "mask": mask.float(), "directions": to(batch.lights.float()),
             "intensities": to(batch.intensities.float()),
-            "family": to(torch.tensor([FAMILIES.index(family) for family in batch.families]))}
+            "family": to(batch.family)}
 
 
 def map_tensors(item, function):
