@@ -301,8 +301,9 @@ def in_bf16(forward, device: torch.device):
 def synchronising_calls(device: str, diligent: Path, out: Path, steps: int) -> list[tuple[str, int]]:
     """Where the training process and a fit wait for the GPU: ``recipe=paper`` training and
     ``preset=paper light=gt`` on cat, ``steps`` steps each, in this process under
-    ``torch.cuda.set_sync_debug_mode("warn")``; each place (file:line of unps or Lightning) with
-    its count."""
+    ``torch.cuda.set_sync_debug_mode("warn")``; each place with its count, named by the innermost
+    line of unps on the stack and, in brackets, the line that waited (torch's or Lightning's)."""
+    import traceback
     import warnings
     from collections import Counter
 
@@ -312,8 +313,20 @@ def synchronising_calls(device: str, diligent: Path, out: Path, steps: int) -> l
     from unps.train import train
 
     places: Counter = Counter()
-    with warnings.catch_warnings(record=True) as caught:
+
+    def note(message, category, filename, lineno, file=None, line=None):
+        if "synchroniz" not in str(message):
+            return
+        stack = traceback.extract_stack()[:-1]
+        ours = next((frame for frame in reversed(stack) if "/unps/" in frame.filename), None)
+        waited = f"{Path(filename).name}:{lineno}"
+        places[waited if ours is None else
+               f"{Path(ours.filename).name}:{ours.lineno}" + ("" if ours.filename == filename else
+                                                              f" ({waited})")] += 1
+
+    with warnings.catch_warnings():
         warnings.simplefilter("always")
+        warnings.showwarning = note
         watched = device.startswith("cuda")      # on a CPU: the same runs, nothing to watch
         if watched:
             torch.cuda.set_sync_debug_mode("warn")
@@ -331,9 +344,6 @@ def synchronising_calls(device: str, diligent: Path, out: Path, steps: int) -> l
         finally:
             if watched:
                 torch.cuda.set_sync_debug_mode(0)
-    for warning in caught:
-        if "synchroniz" in str(warning.message):
-            places[f"{Path(warning.filename).name}:{warning.lineno}"] += 1
     return places.most_common()
 
 

@@ -107,38 +107,43 @@ class Interreflection:
         """
         if self.lu is None:
             raise RuntimeError("Interreflection.update must be called before the first solve")
-        dtype, device = normals.dtype, normals.device
-        key = (device, dtype)
-        if key not in self._cache:
-            self._cache[key] = (self.lu.to(device, dtype), self.pivots.to(device),
-                                self.albedo_full.to(device, dtype))
-        lu, pivots, albedo_full = self._cache[key]
-        scaled = normals * albedo_full                                     # ρ·N_o, full grid
-        facets = self._pool(scaled, device, dtype)                         # (m, 3) F
-        solved = torch.linalg.lu_solve(lu, pivots, facets)                 # (m, 3) F_ny
-        correction = self._upsample(solved - facets, normals.shape[-2:], device, dtype)
+        on = self._on(normals.device, normals.dtype)
+        scaled = normals * on["albedo"]                                    # ρ·N_o, full grid
+        facets = self._pool(scaled, on)                                    # (m, 3) F
+        solved = torch.linalg.lu_solve(on["lu"], on["pivots"], facets)     # (m, 3) F_ny
+        correction = self._upsample(solved - facets, normals.shape[-2:], on)
         return F.normalize(scaled + correction, dim=1, eps=1e-12)
 
-    def _pool(self, values: torch.Tensor, device, dtype) -> torch.Tensor:
-        """(1, 3, H, W) → (m, 3): mask-weighted means over each facet's block."""
+    def _on(self, device: torch.device, dtype: torch.dtype) -> dict[str, torch.Tensor]:
+        """The factors and the grids a solve reads, on ``device`` (in ``dtype``; the indices as
+        they are), made once per update: copied at every step, each copy would hold a GPU's queue."""
+        key = (device, dtype)
+        if key not in self._cache:
+            grid = lambda array: torch.as_tensor(array, device=device, dtype=dtype)[None, None]   # noqa: E731
+            self._cache[key] = {"lu": self.lu.to(device, dtype), "pivots": self.pivots.to(device),
+                                "albedo": self.albedo_full.to(device, dtype), "mask": grid(self.mask),
+                                "facets": grid(self.facets), "index": self.index.to(device)}
+        return self._cache[key]
+
+    def _pool(self, values: torch.Tensor, on: dict[str, torch.Tensor]) -> torch.Tensor:
+        """(1, 3, H, W) → (m, 3): mask-weighted means over each facet's block (``on``: :meth:`_on`)."""
         f = self.factor
         h, w = values.shape[-2:]
         pad = (0, -w % f, 0, -h % f)
-        weight = torch.as_tensor(self.mask, device=device, dtype=dtype)[None, None]
+        weight = on["mask"]
         total = F.avg_pool2d(F.pad(weight, pad), f)
         summed = F.avg_pool2d(F.pad(values * weight, pad), f)
         means = summed / total.clamp_min(1e-12)
-        return means.flatten(2)[0, :, self.index.to(device)].T
+        return means.flatten(2)[0, :, on["index"]].T
 
-    def _upsample(self, values: torch.Tensor, shape, device, dtype) -> torch.Tensor:
+    def _upsample(self, values: torch.Tensor, shape, on: dict[str, torch.Tensor]) -> torch.Tensor:
         """(m, 3) facet values → (1, 3, H, W), bilinear and normalised by the facet mask so
         that the edges are not pulled toward zero (as :func:`unps.solvers.nayar.upsample`)."""
         hf, wf = self.facets.shape
-        grid = torch.zeros(3, hf * wf, device=device, dtype=dtype)
-        grid[:, self.index.to(device)] = values.T
-        weight = torch.as_tensor(self.facets, device=device, dtype=dtype)[None, None]
+        grid = torch.zeros(3, hf * wf, device=values.device, dtype=values.dtype)
+        grid[:, on["index"]] = values.T
         size = (hf * self.factor, wf * self.factor)
         spread = F.interpolate(grid.view(1, 3, hf, wf), size=size, mode="bilinear", align_corners=False)
-        cover = F.interpolate(weight, size=size, mode="bilinear", align_corners=False)
+        cover = F.interpolate(on["facets"], size=size, mode="bilinear", align_corners=False)
         out = spread / cover.clamp_min(1e-6)
         return out[..., : shape[0], : shape[1]]

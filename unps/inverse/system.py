@@ -308,3 +308,8 @@ class InverseRendering(L.LightningModule):
 
     def train_dataloader(self):
         return torch.utils.data.DataLoader(range(self.schedule.steps), batch_size=None)
+
+    def transfer_batch_to_device(self, batch, device, dataloader_idx):
+        """The step counter stays where it is: no step reads it, and copying it to a GPU would
+        make each step wait for the one before."""
+        return batch

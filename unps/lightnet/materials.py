@@ -50,8 +50,8 @@ def shade(maps: ShapeMaps, brdf, lights: torch.Tensor, intensities: torch.Tensor
 def local_frames(normals: torch.Tensor) -> torch.Tensor:
     """(..., 3, 3) rows tangent, bitangent, normal of (..., 3) unit normals (zero normals: zero
     frames)."""
-    axis = torch.where(normals[..., :1].abs() < 0.9, torch.tensor([1.0, 0, 0], device=normals.device),
-                       torch.tensor([0, 1.0, 0], device=normals.device))
+    unit = torch.eye(3, device=normals.device)          # made there: a copy from the CPU would wait
+    axis = torch.where(normals[..., :1].abs() < 0.9, unit[0], unit[1])
     tangent = F.normalize(torch.linalg.cross(axis, normals), dim=-1)
     return torch.stack([tangent, torch.linalg.cross(normals, tangent), normals], -2)
 
