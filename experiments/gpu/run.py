@@ -149,15 +149,21 @@ def step_rates(device: str, steps: int) -> dict[str, float]:
             loss.backward()
             optimiser.step()
 
-        for _ in range(3):
-            step()
-        synchronize(where)
-        start = time.perf_counter()
-        for _ in range(steps):
-            step()
-        synchronize(where)
-        rates[precision] = steps * cfg.recipe.batch_size / (time.perf_counter() - start)
+        rates[precision] = cfg.recipe.batch_size / seconds_per_step(step, steps, where)
     return rates
+
+
+def seconds_per_step(step, steps: int, device: torch.device) -> float:
+    """Seconds that ``step()`` takes on ``device``, over ``steps`` calls after three not timed, the
+    device waited for before and after."""
+    for _ in range(3):
+        step()
+    synchronize(device)
+    start = time.perf_counter()
+    for _ in range(steps):
+        step()
+    synchronize(device)
+    return (time.perf_counter() - start) / steps
 
 
 def loop_breakdown(device: str, steps: int, workers: int | None, threads: int,
@@ -262,14 +268,7 @@ def fit_step_times(name: str, diligent: Path, device: str, steps: int) -> dict[s
         optimiser.zero_grad()
 
     def ms() -> float:
-        for _ in range(3):
-            step()
-        synchronize(where)
-        start = time.perf_counter()
-        for _ in range(steps):
-            step()
-        synchronize(where)
-        return 1e3 * (time.perf_counter() - start) / steps
+        return 1e3 * seconds_per_step(step, steps, where)
 
     times = {"as run": ms()}
     if where.type == "cuda":
