@@ -79,7 +79,10 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
     log.info("unps (%s preset): working grid %d×%d (%d object pixels, ×%d coarser than the subject), "
              "%d images", preset.name, w, h, work.mask.sum(), factor, work.n_images)
 
-    clipped = clipped_values(cropped.observed_images(), cropped.mask)
+    observed = cropped.observed_images()
+    clipped = clipped_values(observed, cropped.mask)
+    black = black_everywhere(observed, cropped.mask)
+    del observed
     usable = unclipped(clipped, cropped.mask, factor)
     if usable is not None:
         log.info("%d of %d values on the working grid hold clipped pixels and are left out of the fit",
@@ -113,7 +116,6 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
                                                           rendering["reflectance"], directions, scales,
                                                           work.mask, factor, ~clipped)
             normals = upsampled
-        black = black_everywhere(cropped.observed_images(), cropped.mask)
         if preset.continue_black and black.any():
             normals = continue_surface(normals, cropped.mask, black)
         normals, albedo = on_subject_grid(normals, cropped, subject, directions, scales)
@@ -140,7 +142,7 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
 
 def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.ndarray,
                      reflectance: np.ndarray, directions: np.ndarray, scales: np.ndarray,
-                     work_mask: np.ndarray, factor: int, usable: np.ndarray) -> np.ndarray:
+                     work_mask: np.ndarray, factor: int, usable: np.ndarray) -> tuple[np.ndarray, float]:
     """The upsampled fit's normals with each pixel's solved from its own images
     (:func:`unps.inverse.pixels.refine_pixel_normals`) under the fitted reflectance, upsampled.
 
