@@ -18,7 +18,7 @@ from unps.lightnet import lathe
 from unps.lightnet.brdf import NeuralBRDF
 from unps.lightnet.materials import MaterialBank
 from unps.lightnet.rig import FORMATS, LAYOUTS, Camera, draw_lights, expose, quantize, record, stack_noise
-from unps.lightnet.shapes import SHAPES, sample_generator
+from unps.lightnet.shapes import GROOVE_LENGTH, GROOVE_WIDTH, SHAPES, groove_depth, sample_generator
 from unps.lightnet.data import Draws, LightData, loader_workers
 from unps.lightnet.synthesis import LightDataset, SceneBatch, map_tensors, render, render_batch
 
@@ -56,7 +56,7 @@ def test_rasterising_keeps_the_nearest_point_and_its_normal():
     near = torch.cat([square, torch.full((len(square), 1), 0.3)], 1)
     far = torch.cat([square * 1.6, torch.full((len(square), 1), -0.2)], 1)
     tilted = F.normalize(torch.tensor([0.3, 0.0, 1.0]), dim=0)
-    normals, depth, mask = lathe.rasterise(torch.cat([far, near]), torch.cat(
+    normals, depth, mask = lathe.rasterise(*torch.cat([far, near]).unbind(-1), torch.cat(
         [torch.tensor([0.0, 0, 1]).expand_as(far), tilted.expand_as(near)]), 64)
     centre, ring = (slice(24, 40),) * 2, (slice(8, 12), slice(28, 36))
     assert mask[centre].all() and mask[ring].all()
@@ -71,8 +71,8 @@ def test_a_sheet_shows_the_camera_whichever_side_faces_it():
     square = torch.stack(torch.meshgrid(t, t, indexing="ij"), -1).reshape(-1, 2)
     points = torch.cat([square, torch.zeros(len(square), 1)], 1)
     away = F.normalize(torch.tensor([0.3, 0.0, -1.0]), dim=0).expand_as(points)
-    _, _, one_sided = lathe.rasterise(points, away, 64)
-    normals, _, mask = lathe.rasterise(points, away, 64, two_sided=True)
+    _, _, one_sided = lathe.rasterise(*points.unbind(-1), away, 64)
+    normals, _, mask = lathe.rasterise(*points.unbind(-1), away, 64, two_sided=True)
     assert not one_sided.any()
     centre = (slice(24, 40),) * 2
     assert mask[centre].all()
@@ -83,14 +83,56 @@ def test_a_jar_of_no_thickness_is_one_sheet_without_a_lip():
     def radius(h):
         return 0.4 + 0.1 * torch.cos(3 * h)
 
-    points, normals = lathe.profile_points(radius, 1.2, 0.3, 0.0, samples=64)
+    jar = lathe.jar_points(radius, 1.2, 0.3, 0.0, samples=64)
+    points, normals = jar.points, jar.normals()
     on_wall = points[:, 2] > 0
     height = points[on_wall, 2] / 1.2
     torch.testing.assert_close(points[on_wall, :2].norm(dim=-1), radius(height))   # no inner wall
     outward = (normals[on_wall, :2] * points[on_wall, :2]).sum(-1)
     assert (outward > 0).all()                                  # no lip ring, no inner floor
-    thick, _ = lathe.profile_points(radius, 1.2, 0.3, 0.03, samples=64)
+    thick = lathe.jar_points(radius, 1.2, 0.3, 0.03, samples=64).points
     assert len(thick) > 1.9 * len(points)
+
+
+@pytest.mark.parametrize("wall", [0.0, 0.03])
+def test_a_jar_seen_through_the_normals_it_shows_is_the_jar_seen_through_all_of_them(wall):
+    """jar_view turns only the normals of the points that show: the maps of every point turned
+    and rasterised, to the bit."""
+    def radius(h):
+        return 0.4 + 0.1 * torch.cos(3 * h)
+
+    tilt, turn, extent, resolution = 0.9, 2.1, 1.5, 48
+    maps = lathe.jar_view(radius, 1.2, 0.3, wall, tilt, turn, extent, resolution)
+    jar = lathe.jar_points(radius, 1.2, 0.3, wall, samples=4 * resolution)
+    c, s, ct, st = math.cos(tilt), math.sin(tilt), math.cos(turn), math.sin(turn)
+    rotation = torch.tensor([[ct, -st, 0], [st, ct, 0], [0, 0, 1.0]]) @ torch.tensor(
+        [[1.0, 0, 0], [0, c, -s], [0, s, c]])
+    points, normals = jar.points @ rotation.T, jar.normals() @ rotation.T
+    low, high = points.min(0).values, points.max(0).values
+    points = (points - (low + high) / 2) * (extent / float((high - low)[:2].max()))
+    whole = lathe.rasterise(*points.unbind(-1), normals, resolution, two_sided=wall == 0)
+    assert all(torch.equal(a, b) for a, b in zip(maps, whole))
+
+
+def test_grooves_worked_out_around_each_groove_are_those_worked_out_over_the_whole_image():
+    g = torch.Generator().manual_seed(5)
+    for resolution in (32, 64, 128, 256):
+        count = 150
+        u = lambda *shape: torch.rand(*shape, generator=g)           # noqa: E731
+        start, turn = (u(count, 2, 1, 1) - 0.5) * 1.6, math.pi * u(count, 1, 1)
+        length = GROOVE_LENGTH[0] + GROOVE_LENGTH[1] * u(count, 1, 1)
+        width = GROOVE_WIDTH[0] + GROOVE_WIDTH[1] * u(count, 1, 1)
+        length[:3], width[:3] = sum(GROOVE_LENGTH), sum(GROOVE_WIDTH)     # the longest and widest
+        depth = 0.008 + 0.025 * u(count, 1, 1)
+        t = torch.linspace(-1, 1, resolution)
+        x, y = t[None, :].expand(resolution, resolution), -t[:, None].expand(resolution, resolution)
+        px, py = x - start[:, 0], y - start[:, 1]
+        cos, sin = torch.cos(turn), torch.sin(turn)
+        along = torch.minimum((px * cos + py * sin).clamp_min(0), length)
+        distance = torch.hypot(px - along * cos, py - along * sin)
+        whole = (depth * (1 - distance / width).clamp_min(0)).sum(0)
+        assert whole.count_nonzero() > 0.05 * resolution ** 2
+        assert torch.equal(groove_depth(resolution, start, turn, length, width, depth), whole)
 
 
 def test_jars_show_their_inside_past_the_near_lip():

@@ -131,16 +131,56 @@ def slab(resolution: int, generator: torch.Generator) -> ShapeMaps:
         z = z + height * torch.sigmoid((1 - torch.maximum(a.abs(), b.abs())) / (0.05 + 0.2 * float(u(1))))
     grooves = int(150 * u(1))                                     # short incised V grooves
     start, turn = (u(grooves, 2, 1, 1) - 0.5) * 1.6, math.pi * u(grooves, 1, 1)
-    length, width = 0.03 + 0.1 * u(grooves, 1, 1), 0.01 + 0.025 * u(grooves, 1, 1)
-    px, py = x - start[:, 0], y - start[:, 1]
-    cos, sin = torch.cos(turn), torch.sin(turn)
-    s = torch.minimum((px * cos + py * sin).clamp_min(0), length)
-    distance = torch.hypot(px - s * cos, py - s * sin)
+    length = GROOVE_LENGTH[0] + GROOVE_LENGTH[1] * u(grooves, 1, 1)
+    width = GROOVE_WIDTH[0] + GROOVE_WIDTH[1] * u(grooves, 1, 1)
     depth = 0.008 + 0.025 * u(grooves, 1, 1)
-    z = z - (depth * (1 - distance / width).clamp_min(0)).sum(0)
+    z = z - groove_depth(resolution, start, turn, length, width, depth)
     tilt = (u(2) - 0.5) * 0.5
     z = z + tilt[0] * x + tilt[1] * y
     return maps_from_depth(z, _eroded(mask))
+
+
+GROOVE_LENGTH = (0.03, 0.1)    # a slab's grooves: lowest length and its random excess, view units
+GROOVE_WIDTH = (0.01, 0.025)    # … and their half-width
+
+
+def groove_depth(resolution: int, start: torch.Tensor, turn: torch.Tensor, length: torch.Tensor,
+                 width: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
+    """(R, R) the depth that G straight V grooves take out of a surface, each at most ``depth``
+    deep on its centre line and nothing from ``width`` away.
+
+    Each groove is worked out on a window of pixels around it only (its depth is exactly 0
+    beyond), then spread on a (G, R, R) stack of zeros that is summed over the grooves as a
+    whole-image computation would be: the result is the same to the bit, for a fraction of the
+    arithmetic.
+
+    Args:
+        start: (G, 2, 1, 1) x, y of each groove's first end; turn: (G, 1, 1) its direction
+            (radians, within [0, π)); length, width, depth: (G, 1, 1), view units, each
+            ``length`` and ``width`` within :data:`GROOVE_LENGTH` and :data:`GROOVE_WIDTH`.
+    """
+    count = len(start)
+    t = torch.linspace(-1, 1, resolution)                         # x of each column, −y of each row
+    reach = sum(GROOVE_LENGTH) + 2 * sum(GROOVE_WIDTH)             # a groove's box, at most, per axis
+    side = min(resolution, math.ceil(reach * (resolution - 1) / 2) + 4)
+    cos, sin = torch.cos(turn), torch.sin(turn)
+    sx, sy = start[:, 0], start[:, 1]                              # (G, 1, 1)
+    low_x = torch.minimum(sx, sx + length * cos) - width           # the box's corner of least x …
+    high_y = sy + length * sin + width                             # … and of greatest y (row 0)
+    first_col = ((low_x + 1) * (resolution - 1) / 2).floor().long() - 1
+    first_row = ((1 - high_y) * (resolution - 1) / 2).floor().long() - 1
+    offsets = torch.arange(side)
+    cols = (first_col.view(count, 1, 1).clamp(0, resolution - side) + offsets.view(1, 1, side)).expand(
+        count, side, side)
+    rows = (first_row.view(count, 1, 1).clamp(0, resolution - side) + offsets.view(1, side, 1)).expand(
+        count, side, side)
+    px, py = t[cols] - sx, -t[rows] - sy
+    s = torch.minimum((px * cos + py * sin).clamp_min(0), length)
+    distance = torch.hypot(px - s * cos, py - s * sin)
+    stack = torch.zeros(count, resolution, resolution)
+    stack[torch.arange(count).view(count, 1, 1).expand_as(cols), rows, cols] = \
+        depth * (1 - distance / width).clamp_min(0)
+    return stack.sum(0)
 
 
 def sculpture(resolution: int, generator: torch.Generator) -> ShapeMaps:
