@@ -369,3 +369,21 @@ def test_sheet_jars_scores_the_shipped_network_on_a_walled_jar_of_the_vases_outl
     error = sheets.symmetric_error(net, walled, stacks=2, resolution=config["recipe"]["resolution"])
     assert 0 < error < 20                                 # 7° over 48 stacks (its README)
 
+
+
+def test_highlight_study_applies_each_variant_and_restores_the_shipped_thresholds():
+    from test_highlights import VIEW, cap, glossy, unit
+
+    from unps.inverse import highlights
+
+    study = load_script("lb_highlights", "experiments/light_benchmark/highlights.py")
+    shipped = tuple(getattr(highlights, name) for name in study.THRESHOLDS)
+    assert study.VARIANTS["shipped"] == shipped
+    lights = cap(96)
+    truth = unit(lights[:40] + VIEW + 0.01)
+    fit = unit(truth + [0.5, 0, 0])                                   # 25° off: what the fit left
+    error, share = study.with_rule(fit, truth, glossy(truth, lights), lights, shipped)
+    assert share == 1 and error < 3
+    error, share = study.with_rule(fit, truth, glossy(truth, lights), lights, (5.0, 0.4, 6, 5.0))
+    assert share == 0 and error > 20                                  # the lights too sparse for 5°
+    assert tuple(getattr(highlights, name) for name in study.THRESHOLDS) == shipped

@@ -31,6 +31,7 @@ from unps.errors import InputError
 from unps.geometry import continue_surface
 from unps.inverse.control import fingerprint, train
 from unps.inverse.grids import on_subject_grid, unclipped, upsample_map, upsample_with_detail, working_factor
+from unps.inverse.highlights import highlight_normals
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet
 from unps.inverse.pixels import NOISE_LIMIT, neighbour_pairs, noise_level, refine_pixel_normals
@@ -116,6 +117,9 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
                                                           rendering["reflectance"], directions, scales,
                                                           work.mask, factor, ~clipped)
             normals = upsampled
+        highlight_share = None
+        if preset.highlights:
+            normals, highlight_share = with_highlights(cropped, normals, directions, scales, black)
         if preset.continue_black and black.any():
             normals = continue_surface(normals, cropped.mask, black)
         normals, albedo = on_subject_grid(normals, cropped, subject, directions, scales)
@@ -134,7 +138,7 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
             "interreflection": interreflection.enabled,
             "facet_downsample": solver.factor if solver else None,
             "interreflection_bend_deg": bend["mean"] if bend else None, "moved_from_start_deg": moved,
-            "black_share": black_share, "image_noise": image_noise}
+            "black_share": black_share, "image_noise": image_noise, "highlight_share": highlight_share}
     rendering = Rendering(work.mask, work.images, rendering["reconstruction"], rendering["reflectance"])
     return Estimate(normals, albedo, light_directions=directions if refine_lights else None,
                     light_scales=scales if refine_lights else None, rendering=rendering, info=info)
@@ -185,6 +189,30 @@ def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.n
     refined = normals.copy()
     refined[mask] = solved
     return refined, noise
+
+
+def with_highlights(cropped: Subject, normals: np.ndarray, directions: np.ndarray, scales: np.ndarray,
+                    black: np.ndarray) -> tuple[np.ndarray, float]:
+    """``normals`` (H, W, 3) on the crop with the pixels lit by a specular highlight given the
+    highlight's half vector (:func:`unps.inverse.highlights.highlight_normals`), and the share of
+    the object's pixels that are.
+
+    Args:
+        directions: (n, 3) and scales: (n,) the lights the fit rendered with; black: (H, W) the
+            pixels black in every image (they hold no highlight).
+    """
+    mask = cropped.mask & ~black
+    shading = cropped.images[:, mask].mean(-1) / scales[:, None]
+    half, lit = highlight_normals(shading, directions)
+    share = float(lit.sum() / cropped.mask.sum())
+    if lit.any():
+        moved = float(angular_error(half[lit], normals[mask][lit]).mean())
+        log.info("%.1f%% of the object is lit by a specular highlight the fit's loss leaves out: "
+                 "there the normal is the highlight's half vector, %.1f° from the fit's on average",
+                 100 * share, moved)
+    shown = normals.copy()
+    shown[mask] = np.where(lit[:, None], half, normals[mask])
+    return shown, share
 
 
 def unit(vectors: np.ndarray) -> np.ndarray:

@@ -36,6 +36,10 @@ class Preset:
             on the subject's grid solved against its own images under the fitted reflectance
             (:func:`unps.inverse.pixels.refine_pixel_normals`), unless the images are too noisy
             for it (:data:`unps.inverse.pixels.NOISE_LIMIT`); no effect at full resolution.
+        highlights: beyond the paper, pixels lit by a specular highlight (their brightest image far
+            above the rest, their images not Lambertian, the lights dense) take the highlight's
+            half vector for their normal (:func:`unps.inverse.highlights.highlight_normals`): the
+            fit's L1 loss takes those images for outliers and leaves dark glossy materials loose.
         schedule: the optimisation's :class:`Schedule`.
     """
 
@@ -52,6 +56,7 @@ class Preset:
     init: str = "robust"
     continue_black: bool = True
     refine_pixels: bool = True
+    highlights: bool = True
     schedule: Schedule = Schedule()
 
     def __post_init__(self):
@@ -61,7 +66,7 @@ class Preset:
                              f"{self.reflectance_branch!r}")
         if self.init not in INITS:
             raise InputError(f"preset.init must be one of {', '.join(INITS)}, got {self.init!r}")
-        for name in ("batch_norm", "cast_shadows", "continue_black", "refine_pixels"):
+        for name in ("batch_norm", "cast_shadows", "continue_black", "refine_pixels", "highlights"):
             if not isinstance(getattr(self, name), bool):
                 raise InputError(f"preset.{name} must be true or false, got {getattr(self, name)!r}")
 
