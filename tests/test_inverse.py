@@ -94,6 +94,7 @@ def test_batch_norm_reads_out_with_the_statistics_it_was_fitted_with():
     ("cast_shadows", 1, "preset.cast_shadows must be true or false, got 1"),
     ("continue_black", "yes", "preset.continue_black must be true or false, got 'yes'"),
     ("refine_pixels", "no", "preset.refine_pixels must be true or false, got 'no'"),
+    ("highlights", 0, "preset.highlights must be true or false, got 0"),
     ("init", "woodham", "preset.init must be one of robust, least_squares, got 'woodham'"),
     ("residual", "l2", "preset.residual must be one of absolute, sqrt, relative, albedo, got 'l2'")])
 def test_a_preset_names_a_bad_network_setting(field, value, message):

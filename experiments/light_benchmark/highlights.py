@@ -4,10 +4,11 @@ made without it.
     python experiments/light_benchmark/normals.py --methods unps --set threads=1 \
         preset.highlights=false --tag plain
     python experiments/light_benchmark/highlights.py --run plain                   # ~2 min
-    python experiments/light_benchmark/highlights.py --run plain --diligent ball=<run> cat=<run> pot1=<run>
+    python experiments/light_benchmark/highlights.py --run plain --diligent ball=<run> cat=<run> pot1=<run> \
+        --synthetic Rose=<run> Vase=<run>
 
 For each object of a ``normals.py`` run made with ``preset.highlights=false`` (and each DiLiGenT
-object given as ``name=<run folder of python -m unps.fit subject=name light=gt
+or synthetic subject given as ``name=<run folder of python -m unps.fit subject=name light=gt
 preset.highlights=false>``), the pixels that :func:`unps.inverse.highlights.highlight_normals`
 finds lit by a highlight are given its half vector, under the shipped thresholds and under the
 variants below, and the mean error is printed against the fit's. The fits are not rerun: the
@@ -26,6 +27,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import scenes  # noqa: E402
 
+from hydra import compose, initialize_config_module  # noqa: E402
+from hydra.utils import instantiate  # noqa: E402
+
+from unps.data.checks import usable_subject  # noqa: E402
 from unps.data.diligent import read_diligent_object, read_folder  # noqa: E402
 from unps.inverse import highlights  # noqa: E402
 from unps.metrics import angular_error  # noqa: E402
@@ -34,11 +39,12 @@ DEFAULT_CACHE = Path("~/.cache/unps/light_benchmark").expanduser()
 THRESHOLDS = ("PEAK_RATIO", "NOT_LAMBERTIAN", "MIN_LIT", "MAX_SPACING_DEG")   # of unps.inverse.highlights
 VARIANTS = {   # label: the THRESHOLDS
     "shipped": tuple(getattr(highlights, name) for name in THRESHOLDS),
-    "cosine 0.3": (5.0, 0.3, 6, 15.0),
-    "cosine 0.5": (5.0, 0.5, 6, 15.0),
-    "no cosine test": (5.0, -1.0, 6, 15.0),
-    "peak 8": (8.0, 0.4, 6, 15.0),
-    "any lit count": (5.0, 0.4, 0, 15.0),
+    "peak 5": (5.0, 0.4, 6, 15.0),
+    "peak 5, cosine 0.3": (5.0, 0.3, 6, 15.0),
+    "peak 12": (12.0, 0.4, 6, 15.0),
+    "cosine 0.5": (8.0, 0.5, 6, 15.0),
+    "no cosine test": (8.0, -1.0, 6, 15.0),
+    "any lit count": (8.0, 0.4, 0, 15.0),
 }
 
 
@@ -57,8 +63,9 @@ def with_rule(fit: np.ndarray, gt: np.ndarray, shading: np.ndarray, lights: np.n
     return float(angular_error(np.where(lit[:, None], half, fit), gt).mean()), float(lit.mean())
 
 
-def cases(cache: Path, run: str, diligent: list[str]):
-    """(name, subject, normals file) of each object of the run, then of each DiLiGenT one."""
+def cases(cache: Path, run: str, diligent: list[str], synthetic: list[str]):
+    """(name, subject, normals file) of each object of the run, then of each DiLiGenT and
+    synthetic one."""
     for obj in scenes.OBJECTS:
         normals = cache / "normals" / run / f"{obj.name}-unps" / "normals.npy"
         if normals.is_file():
@@ -68,6 +75,12 @@ def cases(cache: Path, run: str, diligent: list[str]):
     for item in diligent:
         name, folder = item.split("=", 1)
         yield name, read_diligent_object(os.environ["UNPS_DILIGENT_DIR"], name), Path(folder) / "normals.npy"
+    for item in synthetic:
+        name, folder = item.split("=", 1)
+        with initialize_config_module("unps.conf", version_base="1.3"):
+            config = compose("fit", overrides=[f"subject={name}"])
+        subject = usable_subject(instantiate(config.subject, _partial_=True)())
+        yield name, subject, Path(folder) / "normals.npy"
 
 
 def main(argv=None) -> None:
@@ -75,13 +88,14 @@ def main(argv=None) -> None:
     parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
     parser.add_argument("--run", required=True, help="tag of a normals.py run with preset.highlights=false")
     parser.add_argument("--diligent", nargs="*", default=[], metavar="NAME=RUN")
+    parser.add_argument("--synthetic", nargs="*", default=[], metavar="NAME=RUN")
     args = parser.parse_args(argv)
     print(f"fits of normals.py --tag {args.run} (96 lights, light=gt); normal MAE °, "
           f"share of pixels changed in brackets")
     print(f"{'object':<12}{'fit':>7}" + "".join(f"{label:>22}" for label in VARIANTS))
     gains = {label: [] for label in VARIANTS}
     names = []
-    for name, subject, file in cases(args.cache, args.run, args.diligent):
+    for name, subject, file in cases(args.cache, args.run, args.diligent, args.synthetic):
         mask = subject.mask & (np.linalg.norm(subject.normals, axis=-1) > 0.5)
         fit, gt = np.load(file)[mask], subject.normals[mask]
         shading = subject.images[:, mask].mean(-1)
@@ -94,11 +108,11 @@ def main(argv=None) -> None:
         names.append(name)
         print(line, flush=True)
     benchmark = [k for k, name in enumerate(names) if name in {o.name for o in scenes.OBJECTS}]
-    print("\nchange of the benchmark's mean; objects worse by > 0.05°; the DiLiGenT objects' changes")
+    print("\nchange of the benchmark's mean; objects worse by > 0.05°; the other subjects' changes")
     for label, change in gains.items():
         change = np.array(change)
         others = ", ".join(f"{names[k]} {change[k]:+.2f}°" for k in range(len(names)) if k not in benchmark)
-        print(f"{label:<16}{change[benchmark].mean():+7.2f}°  worse on {(change[benchmark] > 0.05).sum():>2}"
+        print(f"{label:<20}{change[benchmark].mean():+7.2f}°  worse on {(change[benchmark] > 0.05).sum():>2}"
               f"   {others}")
 
 
