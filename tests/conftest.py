@@ -60,3 +60,20 @@ def rendered(concave: bool, size: int = 48, n_lights: int = 32) -> Subject:
     images = np.repeat((0.7 * shading * mask)[..., None], 3, -1).astype(np.float32)
     return Subject("bowl" if concave else "dome", images, mask, light_directions=lights,
                    normals=normals)
+
+
+TINY = dict(name="tiny", width=16, depth=3, first_kernel=1, reflectance_width=8, steps=20,
+            lr_drop_at=18, images_per_step=8, update_every=10)
+"""A preset small enough for a test: a 20-step fit of a small subject in seconds."""
+
+
+def tiny_fit(subject: Subject, **preset):
+    """``method=unps`` on ``subject`` under its own lights with :data:`TINY` and ``preset``'s
+    fields, no interreflections, seed 0."""
+    from unps.inverse.fit import neural_inverse_rendering
+    from unps.inverse.settings import InterreflectionModel, Preset
+
+    torch.manual_seed(0)
+    return neural_inverse_rendering(subject, subject.light_directions, Preset.from_config(**TINY, **preset),
+                                    InterreflectionModel(enabled=False))
+

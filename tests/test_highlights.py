@@ -2,18 +2,14 @@
 
 import numpy as np
 import pytest
-import torch
+from conftest import tiny_fit
 
 from unps.data.subject import Subject
 from unps.inverse import highlights
-from unps.inverse.fit import neural_inverse_rendering
 from unps.inverse.highlights import MAX_SPACING_DEG, highlight_normals, lambertian_misfit, light_spacing
-from unps.inverse.settings import InterreflectionModel, Preset
 from unps.metrics import angular_error
 
 VIEW = np.array([0.0, 0.0, 1.0])
-TINY = dict(name="tiny", width=16, depth=3, first_kernel=1, reflectance_width=8, steps=20,
-            lr_drop_at=18, images_per_step=8, update_every=10)
 
 
 def unit(v: np.ndarray) -> np.ndarray:
@@ -91,13 +87,7 @@ def test_a_fit_of_a_dark_glossy_sphere_reads_its_highlights(caplog):
     sphere = Subject("glossy", images, mask, lights.astype(np.float32), normals=normals)
     caplog.set_level("INFO")
 
-    def fitted(highlights: bool):
-        torch.manual_seed(0)
-        return neural_inverse_rendering(sphere, sphere.light_directions,
-                                        Preset.from_config(**TINY, highlights=highlights),
-                                        InterreflectionModel(enabled=False))
-
-    read, plain = fitted(True), fitted(False)
+    read, plain = tiny_fit(sphere, highlights=True), tiny_fit(sphere, highlights=False)
     _, flagged = highlight_normals(images[:, mask].mean(-1), lights)
     lit = np.zeros_like(mask)
     lit[mask] = flagged

@@ -6,7 +6,7 @@ import re
 import numpy as np
 import pytest
 import torch
-from conftest import rendered
+from conftest import TINY, rendered, tiny_fit
 from hydra import compose, initialize_config_module
 
 from unps.data.analytic import render_lambertian
@@ -25,8 +25,6 @@ from unps.inverse.networks import NormalNet, ReflectanceNet, normal_net_input, s
 from unps.inverse.system import InverseRendering, residual_weight, visibility
 from unps.metrics import angular_error
 
-TINY = dict(name="tiny", width=16, depth=3, first_kernel=1, reflectance_width=8, steps=20,
-            lr_drop_at=18, images_per_step=8, update_every=10)
 NAYAR = dict(downsample=2, occlusion=True, albedo=None)
 
 
@@ -425,13 +423,7 @@ def test_pixels_black_in_every_image_get_the_surface_continued(caplog):
     images[:, band] = np.where(np.arange(12)[:, None, None] % 2, 1 / 255, 0)   # levels 0 and 1
     dark = sphere.replace(images=images.astype(np.float32), light_intensities=None)   # as captured
     caplog.set_level("INFO")
-    def fitted(continue_black: bool):
-        torch.manual_seed(0)
-        return neural_inverse_rendering(dark, sphere.light_directions,
-                                        Preset.from_config(**TINY, continue_black=continue_black),
-                                        InterreflectionModel(enabled=False))
-
-    continued, plain = fitted(True), fitted(False)
+    continued, plain = tiny_fit(dark, continue_black=True), tiny_fit(dark, continue_black=False)
     share = band.sum() / sphere.mask.sum()
     assert continued.info["black_share"] == plain.info["black_share"] == pytest.approx(share)
     np.testing.assert_array_equal(continued.normals[~band], plain.normals[~band])
@@ -448,13 +440,7 @@ def test_a_fit_on_a_coarser_grid_solves_each_pixel_of_the_subject(caplog):
     sphere = render_lambertian("sphere", size=40, n_lights=16, seed=1)
     caplog.set_level("INFO")
 
-    def fitted(refine: bool):
-        torch.manual_seed(0)
-        return neural_inverse_rendering(sphere, sphere.light_directions,
-                                        Preset.from_config(**TINY, max_pixels=400, refine_pixels=refine),
-                                        InterreflectionModel(enabled=False))
-
-    refined, plain = fitted(True), fitted(False)
+    refined, plain = (tiny_fit(sphere, max_pixels=400, refine_pixels=refine) for refine in (True, False))
     assert refined.info["fit_downsample"] == 2
     error = {name: angular_error(e.normals, sphere.normals)[sphere.mask].mean()
              for name, e in (("refined", refined), ("plain", plain))}
