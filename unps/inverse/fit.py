@@ -204,14 +204,14 @@ def with_highlights(cropped: Subject, normals: np.ndarray, directions: np.ndarra
     mask = cropped.mask & ~black
     shading = cropped.images[:, mask].mean(-1) / scales[:, None]
     half, lit = highlight_normals(shading, directions)
+    fitted = normals[mask]
     share = float(lit.sum() / cropped.mask.sum())
     if lit.any():
-        moved = float(angular_error(half[lit], normals[mask][lit]).mean())
         log.info("%.1f%% of the object is lit by a specular highlight the fit's loss leaves out: "
                  "there the normal is the highlight's half vector, %.1f° from the fit's on average",
-                 100 * share, moved)
+                 100 * share, float(angular_error(half[lit], fitted[lit]).mean()))
     shown = normals.copy()
-    shown[mask] = np.where(lit[:, None], half, normals[mask])
+    shown[mask] = np.where(lit[:, None], half, fitted)
     return shown, share
 
 

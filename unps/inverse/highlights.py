@@ -26,6 +26,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from unps.inverse.pixels import scaled_normals
+
 PEAK_RATIO = 8.0
 """The brightest image over the median image (floored at :data:`FLOOR_SHARE`) a highlight reaches.
 At 5 the light benchmark gained 0.7° more, but unps's Rose, whose petals shadow each other (a
@@ -91,10 +93,7 @@ def lambertian_misfit(shading: np.ndarray, lights: np.ndarray) -> np.ndarray:
         shading: (n, P) as :func:`highlight_normals`; lights: (n, 3) unit directions.
     """
     lit = shading > LIT_SHARE * shading.max(0)
-    gram = np.einsum("jp,ja,jb->pab", lit.astype(np.float64), lights, lights)
-    target = np.einsum("jp,jp,ja->pa", lit, shading, lights)
-    ridge = (1e-9 * np.einsum("paa->p", gram) + 1e-30)[:, None, None] * np.eye(3)   # never singular
-    scaled = np.linalg.solve(gram + ridge, target[..., None])[..., 0]
+    scaled = scaled_normals(shading, lit.astype(np.float64), lights)
     residual = (np.clip(scaled @ lights.T, 0, None).T - shading) * lit
     energy = ((shading * lit) ** 2).sum(0)
     misfit = np.sqrt((residual ** 2).sum(0) / np.maximum(energy, 1e-30))

@@ -52,7 +52,8 @@ def observed_shading(images: np.ndarray, colour: np.ndarray) -> tuple[np.ndarray
 
 
 def weighted_normals(shading: np.ndarray, weight: np.ndarray, lights: np.ndarray) -> np.ndarray:
-    """(P, 3) unit normals minimising Σ_j w_j (t_j − n·l_j)² per pixel (unnormalised n, then scaled).
+    """(P, 3) unit normals minimising Σ_j w_j (t_j − n·l_j)² per pixel (:func:`scaled_normals`,
+    then scaled).
 
     Args:
         shading: (n, P) observed shading t; weight: (n, P) ≥ 0; lights: (n, 3) unit directions.
@@ -61,12 +62,19 @@ def weighted_normals(shading: np.ndarray, weight: np.ndarray, lights: np.ndarray
         (P, 3); NaN or arbitrary where the weighted lights do not span three directions (the caller
         keeps only pixels with enough images).
     """
+    solved = scaled_normals(shading, weight, lights)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return solved / np.linalg.norm(solved, axis=-1, keepdims=True)
+
+
+def scaled_normals(shading: np.ndarray, weight: np.ndarray, lights: np.ndarray) -> np.ndarray:
+    """(P, 3) b minimising Σ_j w_j (t_j − b·l_j)² per pixel: the normal scaled by the albedo, as
+    weighted_normals' arguments; a small ridge keeps every system solvable."""
     gram = np.einsum("jp,ja,jb->pab", weight, lights, lights)
     target = np.einsum("jp,jp,ja->pa", weight, shading, lights)
     ridge = (1e-9 * np.einsum("paa->p", gram) + 1e-30)[:, None, None] * np.eye(3)   # never singular
     with np.errstate(invalid="ignore", divide="ignore"):
-        solved = np.linalg.solve(gram + ridge, target[..., None])[..., 0]
-        return solved / np.linalg.norm(solved, axis=-1, keepdims=True)
+        return np.linalg.solve(gram + ridge, target[..., None])[..., 0]
 
 
 def refine_pixel_normals(images: np.ndarray, colour: np.ndarray, normals: np.ndarray, lights: np.ndarray,
