@@ -387,3 +387,24 @@ def test_highlight_study_applies_each_variant_and_restores_the_shipped_threshold
     error, share = study.with_rule(fit, truth, glossy(truth, lights), lights, (5.0, 0.4, 6, 5.0))
     assert share == 0 and error > 20                                  # the lights too sparse for 5°
     assert tuple(getattr(highlights, name) for name in study.THRESHOLDS) == shipped
+
+
+def test_free_fit_study_finds_a_shared_transform_and_the_elevation_stretch():
+    study = load_script("lb_free_fits", "experiments/light_benchmark/free_fits.py")
+    rng = np.random.default_rng(0)
+    polar, azimuth = np.radians(rng.uniform(5, 40, 30)), rng.uniform(0, 2 * np.pi, 30)
+    start = np.stack([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), np.cos(polar)], 1)
+    bas_relief = np.array([[1, 0, 0], [0, 1, 0], [0.2, -0.1, 0.8]])      # all the lights moved together
+    moved = start @ bas_relief
+    moved /= np.linalg.norm(moved, axis=1, keepdims=True)
+    def degrees(a, b):
+        return np.degrees(np.arccos(np.clip((a * b).sum(1), -1, 1))).mean()
+
+    assert degrees(study.frame_only(start, moved), moved) < 0.5
+    alone = moved + rng.normal(0, 0.05, moved.shape)                       # and each on its own
+    alone /= np.linalg.norm(alone, axis=1, keepdims=True)
+    assert degrees(study.frame_only(start, alone), alone) > 2
+    wider = np.stack([np.sin(1.2 * polar) * np.cos(azimuth), np.sin(1.2 * polar) * np.sin(azimuth),
+                      np.cos(1.2 * polar)], 1)
+    assert study.elevation_stretch(start, wider) == pytest.approx(1.2)
+    assert study.elevation_stretch(start, start) == pytest.approx(1.0)

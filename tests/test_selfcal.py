@@ -147,6 +147,65 @@ def test_pixels_black_in_every_image_weigh_nothing_in_the_loss():
         lit_share(dim, settings.max_pixels)
 
 
+def test_black_values_hold_the_rendering_only_below_the_first_level():
+    from unps.lights.selfcal import black_ceiling, initial_model, objective, working_grid
+
+    sphere = eight_bit(glossy_sphere(), black_columns=16)
+    settings = SelfCalibration(steps=30, max_pixels=600, censor_black=True, prior_weight=0.0)
+    grid = working_grid(sphere, sphere.normals[sphere.mask], settings.max_pixels)
+    target = torch.as_tensor(grid.images[:, grid.mask]).permute(1, 0, 2).float()
+    model = initial_model(grid, target, sphere.light_directions.astype(np.float64), settings)
+    black = target == 0
+    assert black.any() and (~black).any()
+    rendered = model(None).detach()
+    pulls = objective(model, target, settings) - (rendered - target).abs().mean()
+    above_all = torch.full((sphere.n_images, 3), float(rendered.max()) + 1)
+    only_lit = torch.where(black, 0.0, (rendered - target).abs()).mean() + pulls
+    torch.testing.assert_close(objective(model, target, settings, ceiling=above_all), only_lit)
+    at_zero = torch.zeros(sphere.n_images, 3)                    # a ceiling of 0: the plain L1 loss
+    torch.testing.assert_close(objective(model, target, settings, ceiling=at_zero),
+                               objective(model, target, settings))
+    halfway = torch.full((sphere.n_images, 3), float(rendered[black].median()))
+    charged = torch.where(black, (rendered - halfway).clamp_min(0), (rendered - target).abs()).mean() + pulls
+    torch.testing.assert_close(objective(model, target, settings, ceiling=halfway), charged)
+
+    white, captured = 0.5, sphere.replace(light_intensities=None)      # levels as the camera stored them
+    guess = Lights(sphere.light_directions, sphere.light_intensities, "guess")
+    ceiling = black_ceiling(captured, guess, white)
+    expected = (1 / 255) / (guess.intensities * white)
+    np.testing.assert_allclose(ceiling.numpy(), expected, rtol=1e-5)
+    fitted, verdict = self_calibrate(sphere, rotated(sphere, 5), settings)
+    assert verdict.outcome == "changed" and np.isfinite(fitted.directions).all()
+
+
+def jittered(subject: Subject, degrees: float, seed: int = 1) -> Lights:
+    """The subject's lights, each turned by ``degrees`` about its own random axis."""
+    rng = np.random.default_rng(seed)
+    axes = rng.normal(size=(subject.n_images, 3))
+    axes -= (axes * subject.light_directions).sum(1, keepdims=True) * subject.light_directions
+    turns = Rotation.from_rotvec(np.radians(degrees) * axes / np.linalg.norm(axes, axis=1, keepdims=True))
+    return Lights(turns.apply(subject.light_directions).astype(np.float32), None, "jittered")
+
+
+def test_a_held_frame_moves_each_light_alone(glossy):
+    from unps.lights.selfcal import fit, initial_model, working_grid
+
+    settings = SelfCalibration(steps=40, max_pixels=600, hold_frame=True, prior_weight=0.0)
+    start = jittered(glossy, 5)
+    grid = working_grid(glossy, glossy.normals[glossy.mask], settings.max_pixels)
+    target = torch.as_tensor(grid.images[:, grid.mask]).permute(1, 0, 2).float()
+    model = initial_model(grid, target, start.directions.astype(np.float64), settings)
+    fit(model, target, settings)
+    torch.testing.assert_close(model.columns, torch.eye(3)[:, :2])
+    torch.testing.assert_close(model.gbr, torch.tensor([0.0, 0.0, 1.0]))
+    assert model.light_residual.abs().max() > 1e-3
+
+    found, verdict = self_calibrate(glossy, start, SelfCalibration(steps=600, max_pixels=1200, hold_frame=True,
+                                                                  prior_weight=0.0))
+    before, after = (light_errors(lights, glossy)["light_dir_mae"] for lights in (start, found))
+    assert verdict.outcome == "changed" and after < 0.6 * before, (before, after)
+
+
 def test_self_calibration_is_deterministic(glossy):
     settings = SelfCalibration(steps=60, max_pixels=600)
     first, second = (self_calibrate(glossy, rotated(glossy, 10), settings)[0] for _ in range(2))

@@ -127,14 +127,33 @@ def black_everywhere(images: np.ndarray, mask: np.ndarray, levels: int = 2) -> n
         >>> black_everywhere(images, np.ones((1, 4), bool)).astype(int)
         array([[1, 1, 1, 0]])
     """
-    values = images[:, mask]
-    positive = values[values > 0]
-    first = float(positive.min()) if positive.size else 0.0
-    if first == 0.0 or first > FIRST_LEVEL_AT_MOST:
+    first = first_level(images, mask)
+    if first is None:
         return np.zeros(mask.shape, bool)
+    values = images[:, mask]
     peak = np.zeros(mask.shape, images.dtype)
     peak[mask] = values.max(axis=(0, 2))
     return mask & (peak <= levels * first * (1 + 1e-4))
+
+
+def first_level(images: np.ndarray, mask: np.ndarray) -> float | None:
+    """The stack's first quantisation level: its smallest positive value over the object (1/255
+    for 8-bit files, 1.5/255 for 8-bit files read as ``floor``, 1/65535 or more for 16-bit), or
+    None where there is none or it is above :data:`FIRST_LEVEL_AT_MOST` (no step to go by, as
+    in a float stack). A value of 0 stands for light below this level.
+
+    Args:
+        images: (n, H, W, 3) as captured; mask: (H, W) bool.
+
+    Example:
+        >>> images = np.array([0, 1, 2, 3], float).reshape(1, 1, 4, 1).repeat(3, -1) / 255
+        >>> round(first_level(images, np.ones((1, 4), bool)) * 255, 6)
+        1.0
+    """
+    values = images[:, mask]
+    positive = values[values > 0]
+    first = float(positive.min()) if positive.size else 0.0
+    return None if first == 0.0 or first > FIRST_LEVEL_AT_MOST else first
 
 
 def value_levels(images: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -12,8 +12,9 @@ enough for a CPU:
 2. on a working grid of at most ``max_pixels`` object pixels, the depth integrated from those
    normals, the albedo, lobes, one 3×3 frame and small per-light residuals are fitted with Adam
    under an L1 loss, which lets saturated pixels and interreflections go rather than drag the
-   fit; the shadows that the current depth casts from the current lights are rendered, and
-   marched again every ``shadows_every`` steps;
+   fit (a value of 0 holds the rendering only below the images' first quantisation level); the
+   shadows that the current depth casts from the current lights are rendered, and marched again
+   every ``shadows_every`` steps;
 3. the lights are held near the first guess, each as far as the light network was sure of it
    (:mod:`unps.lights.prior`): they move where the images pin them, and only there. A fit that
    diverges returns the first guess; one that moved the lights far from it warns.
@@ -31,7 +32,7 @@ from typing import ClassVar
 import numpy as np
 import torch
 
-from unps.data.checks import black_everywhere
+from unps.data.checks import black_everywhere, first_level
 from unps.data.lights import Verdict
 from unps.data.subject import Subject
 from unps.device import resolve_device
@@ -65,6 +66,17 @@ class SelfCalibration:
             normal explain them); the depth still runs across them and casts their shadows.
             Off: on the light benchmark it helped 8-bit objects with dark materials by up to
             0.7° and cost a nearly flat one 2.3° (``experiments/light_benchmark/README.md``).
+        censor_black: a value of 0 in the images says only that the light there was below the
+            stack's first quantisation level (:func:`unps.data.checks.first_level`): the loss
+            charges a rendering only for what it puts above that level, not for any light at
+            all. Matters on 8-bit captures, whose dark materials and grazing lights read 0: on
+            the light benchmark it gained up to 0.4° there and cost no case more than 0.08°
+            (``experiments/light_benchmark/README.md``).
+        hold_frame: keep the 3×3 frame A that all the lights share at the identity, so that each
+            light moves only by its own residual ε_i. A fit that renders what it cannot match
+            buys its loss with a transform of the whole set (a rotation, a bas-relief, a stretch
+            of the elevations): on the light benchmark one such transform came within 0.5° of
+            a drifted free fit's lights (``experiments/light_benchmark/free_fits.py``).
         lr: learning rate of depth, albedo and lobes.
         lr_lights: learning rate of the light frame and per-light residuals.
         residual_weight: weight of the mean squared per-light residual |ε_i|².
@@ -84,6 +96,8 @@ class SelfCalibration:
     levels: int = 4
     sharpness: tuple[float, ...] = (10.0, 30.0, 100.0, 300.0)
     skip_black: bool = False
+    censor_black: bool = True
+    hold_frame: bool = False
     lr: float = 0.01
     lr_lights: float = 0.003
     residual_weight: float = 0.1
@@ -134,14 +148,17 @@ def self_calibrate(subject: Subject, lights: Lights,
     first_guess = lights.directions.astype(np.float64)
     grid = working_grid(observed, normals_under(gray, first_guess), settings.max_pixels)
     target = torch.as_tensor(grid.images[:, grid.mask]).permute(1, 0, 2).float()  # (m, n, 3)
-    target = target / torch.quantile(target.flatten()[::7], 0.99).clamp_min(1e-12)
+    white = torch.quantile(target.flatten()[::7], 0.99).clamp_min(1e-12)
+    target = target / white
+    ceiling = black_ceiling(subject, lights, float(white)) if settings.censor_black else None
     device = resolve_device(settings.device)
     model = initial_model(grid, target, first_guess, settings).to(device)
     prior = network_prior(lights, settings.prior_weight, settings.prior_floor_deg,
                           settings.prior_intensity)
     weight = lit_share(subject, settings.max_pixels) if settings.skip_black else None
     loss, pull = fit(model, target.to(device), settings, None if prior is None else prior.to(device),
-                     None if weight is None else weight.to(device))
+                     None if weight is None else weight.to(device),
+                     None if ceiling is None else ceiling.to(device))
     directions, scales = (t.detach().cpu().numpy().astype(np.float64) for t in model.lights())
     if not (np.isfinite(loss) and np.all(np.isfinite(directions))):
         log.warning("self-calibration of %s diverged; keeping the first guess", subject.name)
@@ -199,6 +216,17 @@ def lit_share(subject: Subject, max_pixels: int) -> torch.Tensor | None:
     return torch.as_tensor(grid.images[0][grid.mask][:, 0])
 
 
+def black_ceiling(subject: Subject, lights: Lights, white: float) -> torch.Tensor | None:
+    """(n, 3) what a value of 0 in image i and channel c of the self-calibration's target stands
+    for at most: the captured stack's first quantisation level, divided as the target is by the
+    first guess's intensity and the target's ``white`` level; None without a first level."""
+    first = first_level(subject.observed_images(), subject.mask)
+    if first is None:
+        return None
+    intensities = lights.intensities if lights.intensities is not None else np.ones((subject.n_images, 3))
+    return torch.as_tensor(first / (intensities * white), dtype=torch.float32)
+
+
 def initial_model(grid: Subject, target: torch.Tensor, scaled_lights: np.ndarray,
                   settings: SelfCalibration) -> SelfCalibrationModel:
     """The model at its start: depth integrated from the grid's normals, a uniform mid-grey
@@ -222,11 +250,17 @@ def initial_model(grid: Subject, target: torch.Tensor, scaled_lights: np.ndarray
 
 
 def objective(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibration,
-              visible: torch.Tensor | None = None, weight: torch.Tensor | None = None) -> torch.Tensor:
+              visible: torch.Tensor | None = None, weight: torch.Tensor | None = None,
+              ceiling: torch.Tensor | None = None) -> torch.Tensor:
     """Mean absolute image error (cast shadows where ``visible`` (m, n) is 0; each pixel weighted
-    by ``weight`` (m,) where given) plus the pulls on the per-light residuals and the bas-relief."""
+    by ``weight`` (m,) where given; where the target is 0 and ``ceiling`` (n, 3) is given, only
+    what the rendering puts above the ceiling) plus the pulls on the per-light residuals and the
+    bas-relief."""
     mu, nu, lam = model.gbr
-    error = (model(visible) - target).abs()
+    rendered = model(visible)
+    error = (rendered - target).abs()
+    if ceiling is not None:
+        error = torch.where(target == 0, (rendered - ceiling).clamp_min(0), error)
     if weight is not None:
         error = error * (weight / weight.mean())[:, None, None]
     return (error.mean()
@@ -235,11 +269,14 @@ def objective(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfC
 
 
 def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibration,
-        prior: NetworkPrior | None = None, weight: torch.Tensor | None = None) -> tuple[float, float]:
-    """Adam on every unknown of the model for ``settings.steps`` steps, the cast shadows marched
-    again every ``settings.shadows_every`` steps, the pixels weighted by ``weight`` (m,) where
-    given; stops early on a non-finite loss, read every :data:`CHECK_EVERY` steps (a loss that
-    is not finite leaves the parameters so, and the final loss with them).
+        prior: NetworkPrior | None = None, weight: torch.Tensor | None = None,
+        ceiling: torch.Tensor | None = None) -> tuple[float, float]:
+    """Adam on every unknown of the model (the shared frame held where ``settings.hold_frame``)
+    for ``settings.steps`` steps, the cast shadows marched again every ``settings.shadows_every``
+    steps, the pixels weighted by ``weight`` (m,) and the black values held only to ``ceiling``
+    (n, 3) where given (:func:`objective`); stops early on a non-finite loss, read every
+    :data:`CHECK_EVERY` steps (a loss that is not finite leaves the parameters so, and the final
+    loss with them).
 
     Returns:
         The objective and the prior's pull at the end, with the shadows of the final depth and
@@ -248,13 +285,15 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
     every = settings.shadows_every
     visible = None
     surface_parameters = [model.log_albedo, model.lobe_logits, *model.depth.parameters()]
+    light_parameters = [model.light_residual] if settings.hold_frame else [
+        model.columns, model.gbr, model.light_residual]
     optimiser = torch.optim.Adam([
         dict(params=surface_parameters, lr=settings.lr),
-        dict(params=[model.columns, model.gbr, model.light_residual], lr=settings.lr_lights)])
+        dict(params=light_parameters, lr=settings.lr_lights)])
 
     def total(visible: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
         pull = prior.cost(*model.lights()) if prior is not None else torch.zeros((), device=target.device)
-        return objective(model, target, settings, visible, weight) + pull, pull
+        return objective(model, target, settings, visible, weight, ceiling) + pull, pull
 
     for step in range(settings.steps):
         if every and step % every == 0:

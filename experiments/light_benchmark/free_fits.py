@@ -1,0 +1,165 @@
+"""Where do free self-calibrations go? The shared frame, the lights' elevation and the outline.
+
+    python experiments/light_benchmark/free_fits.py                 # benchmark and DiLiGenT cases
+    python experiments/light_benchmark/free_fits.py --report        # the tables from what has run
+
+Each case runs the network and the reversal test (the *start*), then two self-calibrations from
+it: the one shipped until 2026-11-27 (held near the network's lights, black values not yet
+censored) and a free one (``prior_weight=0``, pixels black in every image left out: the best of
+the free fits measured). It reports, per case:
+
+- how much of the free fit's move one 3×3 transform of all the start's lights explains (the
+  *frame*: a rotation, a bas-relief, a stretch of the elevations), against the truth;
+- the *elevation stretch* of the network: the factor on the lights' angles from the view that
+  best maps the start's onto the true ones (1: the spread of the elevations is right);
+- the mean n_z, on the object's outline, of the robust initialisation's normals under each set of
+  lights, and what keeping the free fit only where it raises that n_z would give.
+
+Results are kept case by case in ``--out`` (default ``<cache>/free_fits``); a rerun resumes.
+None of it feeds training.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+from unps.lightnet.estimate import network_lights
+from unps.lights.reversal import ReversalTest
+from unps.lights.selfcal import SelfCalibration
+from unps.metrics import angular_error
+from unps.solvers.rpca import robust_init
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import benchmark  # noqa: E402
+import scenes  # noqa: E402
+
+FREE = SelfCalibration(device="cpu", prior_weight=0.0, skip_black=True, censor_black=False)
+HELD = SelfCalibration(device="cpu", censor_black=False)      # as shipped until 2026-11-27
+MARGINS = (0.0, 0.02, 0.05)      # n_z margins the outline rule tries
+
+
+def run_case(subject) -> dict:
+    """Directions (n, 3) of the truth, the start and both fits, with the outline's mean n_z under
+    each."""
+    began = time.perf_counter()
+    network, _ = network_lights(subject, device="cpu")
+    start, _ = ReversalTest(device="cpu")(subject, network)
+    lights = {"truth": subject.light_directions, "start": start.directions,
+              "held": HELD(subject, start)[0].directions, "free": FREE(subject, start)[0].directions}
+    return {**{k: np.asarray(v, np.float64).tolist() for k, v in lights.items()},
+            "outline_nz": {k: outline_nz(subject, np.asarray(v, np.float32)) for k, v in lights.items()},
+            "seconds": time.perf_counter() - began}
+
+
+def outline_nz(subject, directions: np.ndarray) -> float:
+    """Mean n_z of the robust initialisation's normals under ``directions`` on the outline: the
+    object pixels with a 4-neighbour off the mask."""
+    mask = subject.mask
+    outline = mask & ~ndimage.binary_erosion(mask)
+    return float(robust_init(subject, directions).normals[outline][:, 2].mean())
+
+
+def frame_only(start: np.ndarray, fitted: np.ndarray, rounds: int = 50) -> np.ndarray:
+    """(n, 3) unit directions: the one 3×3 transform T of all of ``start`` (n, 3) whose images
+    s_i·T come nearest ``fitted``'s directions, applied. Least squares of s_i·T against k_i·f_i,
+    alternating with each light's length k_i (their mean held at 1), so that a shared transform,
+    which changes the lights' lengths, is found whole."""
+    lengths = np.ones(len(start))
+    for _ in range(rounds):
+        transform, *_ = np.linalg.lstsq(start, fitted * lengths[:, None], rcond=None)
+        lengths = np.maximum((start @ transform * fitted).sum(1), 1e-6)
+        lengths /= lengths.mean()
+    moved = start @ transform
+    return moved / np.linalg.norm(moved, axis=1, keepdims=True)
+
+
+def elevation_stretch(start: np.ndarray, truth: np.ndarray) -> float:
+    """The factor k minimising Σ (k·θ_start − θ_true)² over the lights' angles θ from the view."""
+    def polar(d):
+        return np.degrees(np.arccos(np.clip(d[:, 2], -1, 1)))
+    a, b = polar(start), polar(truth)
+    return float((a * b).sum() / max((a * a).sum(), 1e-12))
+
+
+def summarise(result: dict) -> dict:
+    """The case's light errors (mean degrees), its free fit's frame part, its elevation stretch
+    and outline n_z."""
+    d = {k: np.asarray(result[k], np.float64) for k in ("truth", "start", "held", "free")}
+    error = {k: float(angular_error(d[k], d["truth"]).mean()) for k in ("start", "held", "free")}
+    return {**error, "frame": float(angular_error(frame_only(d["start"], d["free"]), d["truth"]).mean()),
+            "stretch": elevation_stretch(d["start"], d["truth"]), "nz": result["outline_nz"]}
+
+
+def report(rows: dict) -> str:
+    """Per case, then per light count: the fits' errors and the outline rule."""
+    lines = [f"{'group':<9} {'case':<12} {'set':>3} {'start':>7} {'held':>7} {'free':>7} {'frame':>7} "
+             f"{'stretch':>7}   outline n_z: {'truth':>6} {'start':>6} {'held':>6} {'free':>6}"]
+    for (group, name, label), s in rows.items():
+        nz = s["nz"]
+        lines.append(f"{group:<9} {name:<12} {label:>3} {s['start']:>6.2f}° {s['held']:>6.2f}° "
+                     f"{s['free']:>6.2f}° {s['frame']:>6.2f}° {s['stretch']:>7.2f}                "
+                     f"{nz['truth']:>6.3f} {nz['start']:>6.3f} {nz['held']:>6.3f} {nz['free']:>6.3f}")
+    lines.append(f"\n{'group':<9} {'set':>4} {'cases':>5} {'start':>7} {'held':>7} {'free':>7} "
+                 + " ".join(f"{f'n_z +{m:g}':>16}" for m in MARGINS)
+                 + "   (mean error / worst raise over held)")
+    for group, label in sorted({(k[0], k[2]) for k in rows}, key=lambda k: (k[0], -int(k[1]))):
+        chosen = [s for k, s in rows.items() if k[0] == group and k[2] == label]
+        cells = []
+        for margin in MARGINS:
+            final = [s["free"] if s["nz"]["free"] > s["nz"]["held"] + margin else s["held"] for s in chosen]
+            worst = max(f - s["held"] for f, s in zip(final, chosen))
+            cells.append(f"{np.mean(final):>7.2f}° / {worst:>5.2f}°")
+        means = [np.mean([s[k] for s in chosen]) for k in ("start", "held", "free")]
+        lines.append(f"{group:<9} {label:>4} {len(chosen):>5} " + " ".join(f"{m:>6.2f}°" for m in means)
+                     + " " + " ".join(cells))
+    stretches = np.array([s["stretch"] for k, s in rows.items() if k[0] == "benchmark"])
+    if len(stretches):
+        lines.append(f"\nnetwork's elevation stretch on the benchmark: median {np.median(stretches):.2f}, "
+                     f"{(stretches < 0.9).sum()} cases below 0.9, {(stretches > 1.1).sum()} above 1.1 "
+                     f"of {len(stretches)}")
+    return "\n".join(lines)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--data", type=Path, default=benchmark.DEFAULT_DATA)
+    parser.add_argument("--cache", type=Path, default=benchmark.DEFAULT_CACHE)
+    parser.add_argument("--out", type=Path, default=None, help="default: <cache>/free_fits")
+    parser.add_argument("--only", nargs="+", choices=benchmark.GROUPS, default=["benchmark", "diligent"])
+    parser.add_argument("--sets", nargs="+", choices=list(scenes.LIGHT_SETS), default=list(scenes.LIGHT_SETS))
+    parser.add_argument("--names", nargs="*", help="only these objects or subjects")
+    parser.add_argument("--report", action="store_true", help="print the tables from the cases run so far")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
+    args = parser.parse_args()
+    logging.basicConfig(level=logging.ERROR, format="%(name)s: %(message)s")
+    import torch
+    torch.set_num_threads(args.threads)
+    out = args.out or args.cache / "free_fits"
+    out.mkdir(parents=True, exist_ok=True)
+    rows = {}
+    for group, name, label, read in benchmark.cases(args.only, args.sets, args.data, args.cache, args.names):
+        path = out / f"{group}-{name}-{label}.json"
+        if path.is_file():
+            result = json.loads(path.read_text())
+        elif args.report:
+            continue
+        else:
+            result = run_case(read())
+            path.write_text(json.dumps(result))
+            s = summarise(result)
+            print(f"{group} {name} {label}: start {s['start']:.2f}° held {s['held']:.2f}° free "
+                  f"{s['free']:.2f}° ({result['seconds']:.0f} s)", flush=True)
+        rows[group, name, label] = summarise(result)
+    print(report(rows))
+
+
+if __name__ == "__main__":
+    main()
