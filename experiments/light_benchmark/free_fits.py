@@ -22,7 +22,6 @@ None of it feeds training.
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import sys
 import time
@@ -39,6 +38,7 @@ from unps.solvers.rpca import robust_init
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import benchmark  # noqa: E402
+import runs  # noqa: E402
 import scenes  # noqa: E402
 
 FREE = SelfCalibration(device="cpu", prior_weight=0.0, skip_black=True, censor_black=False)
@@ -143,21 +143,14 @@ def main():
     import torch
     torch.set_num_threads(args.threads)
     out = args.out or args.cache / "free_fits"
-    out.mkdir(parents=True, exist_ok=True)
+    runs.claim(out, {"scenes": scenes.SCENE_VERSION, "held": repr(HELD), "free": repr(FREE)})
     rows = {}
-    for group, name, label, read in benchmark.cases(args.only, args.sets, args.data, args.cache, args.names):
-        path = out / f"{group}-{name}-{label}.json"
-        if path.is_file():
-            result = json.loads(path.read_text())
-        elif args.report:
-            continue
-        else:
-            result = run_case(read())
-            path.write_text(json.dumps(result))
-            s = summarise(result)
+    cases = benchmark.cases(args.only, args.sets, args.data, args.cache, args.names)
+    for group, name, label, result, ran in runs.kept_or_run(cases, out, run_case, args.report):
+        s = rows[group, name, label] = summarise(result)
+        if ran:
             print(f"{group} {name} {label}: start {s['start']:.2f}° held {s['held']:.2f}° free "
                   f"{s['free']:.2f}° ({result['seconds']:.0f} s)", flush=True)
-        rows[group, name, label] = summarise(result)
     print(report(rows))
 
 

@@ -23,3 +23,17 @@ def claim(out: Path, made_with) -> None:
         return
     out.mkdir(parents=True, exist_ok=True)
     recorded.write_text(json.dumps(made_with) + "\n")
+
+
+def kept_or_run(cases, out: Path, run, report_only: bool = False):
+    """For each case of :func:`benchmark.cases` (group, name, label, read), its result as kept in
+    run folder ``out``, or, where it has not run yet, ``run(read())`` kept there (skipped when
+    ``report_only``). Yields (group, name, label, result, ran_now)."""
+    for group, name, label, read in cases:
+        path = out / f"{group}-{name}-{label}.json"
+        if path.is_file():
+            yield group, name, label, json.loads(path.read_text()), False
+        elif not report_only:
+            result = run(read())
+            path.write_text(json.dumps(result))
+            yield group, name, label, result, True

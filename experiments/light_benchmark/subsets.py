@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import ast
-import json
 import logging
 import sys
 import time
@@ -159,20 +158,16 @@ def main():
                          "stages": ["reversal", "selfcal"], "settings": args.settings})
     except (ValueError, TypeError, SyntaxError) as e:
         parser.error(str(e))
+    def run(subject):
+        return run_case(subject, selfcal)
+
     rows = {}
-    for group, name, label, read in benchmark.cases(args.only, args.sets, args.data, args.cache, args.names):
-        path = out / f"{group}-{name}-{label}.json"
-        if path.is_file():
-            result = json.loads(path.read_text())
-        elif args.report:
-            continue
-        else:
-            result = run_case(read(), selfcal)
-            path.write_text(json.dumps(result))
-            s = summarise(result)
+    cases = benchmark.cases(args.only, args.sets, args.data, args.cache, args.names)
+    for group, name, label, result, ran in runs.kept_or_run(cases, out, run, args.report):
+        s = rows[group, name, label] = summarise(result)
+        if ran:
             print(f"{group} {name} {label}: network {s['network']:.2f}° selfcal {s['full']:.2f}° "
                   f"agreement {s['agreement']:+.2f} ({result['seconds']:.0f} s)", flush=True)
-        rows[group, name, label] = summarise(result)
     print(report(rows))
 
 
