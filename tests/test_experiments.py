@@ -408,3 +408,14 @@ def test_free_fit_study_finds_a_shared_transform_and_the_elevation_stretch():
                       np.cos(1.2 * polar)], 1)
     assert study.elevation_stretch(start, wider) == pytest.approx(1.2)
     assert study.elevation_stretch(start, start) == pytest.approx(1.0)
+
+
+def test_error_by_angle_splits_the_mean_into_bands_that_add_up():
+    study = load_script("calibrated_error_by_angle", "experiments/calibrated/error_by_angle.py")
+    from_view = np.radians([10.0, 40.0, 60.0, 70.0, 80.0])
+    truth = np.stack([np.sin(from_view), np.zeros(5), np.cos(from_view)], 1)
+    error = np.array([1.0, 2.0, 3.0, 4.0, 40.0])
+    rows = study.bands(error, truth)
+    assert [share for _, share, _, _ in rows[:5]] == [0.2] * 5
+    assert sum(adds for _, _, _, adds in rows[:5]) == pytest.approx(error.mean())
+    assert rows[5][1:] == (0.2, 40.0, 8.0)
