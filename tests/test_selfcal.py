@@ -253,7 +253,7 @@ def test_the_pull_toward_the_network_loosens_where_its_passes_disagree():
 def test_a_matte_sphere_under_12_lights_keeps_the_networks_lights():
     """A Lambertian sphere's images pin its lights only through integrability and a uniform
     albedo, which a real object need not have: the default self-calibration leaves the network's
-    estimate nearly where it is (measured: moved 1.04°, error 2.56° → 2.82°), the fit without
+    estimate nearly where it is (measured: moved 1.03°, error 2.56° → 2.82°), the fit without
     the pull moves it further (1.64°, to 1.51°)."""
     from unps.data.analytic import render_lambertian
     from unps.lightnet.estimate import network_lights
