@@ -98,6 +98,12 @@ def summarise(result: dict) -> dict:
             "stretch": elevation_stretch(d["start"], d["truth"]), "nz": result["outline_nz"]}
 
 
+def progress(case: tuple, s: dict, result: dict) -> str:
+    """The line printed when a case has run."""
+    return (f"{' '.join(case)}: start {s['start']:.2f}° held {s['held']:.2f}° free {s['free']:.2f}° "
+            f"({result['seconds']:.0f} s)")
+
+
 def report(rows: dict) -> str:
     """Per case, then per light count: the fits' errors and the outline rule."""
     lines = [f"{'group':<9} {'case':<12} {'set':>3} {'start':>7} {'held':>7} {'free':>7} {'frame':>7} "
@@ -110,8 +116,7 @@ def report(rows: dict) -> str:
     lines.append(f"\n{'group':<9} {'set':>4} {'cases':>5} {'start':>7} {'held':>7} {'free':>7} "
                  + " ".join(f"{f'n_z +{m:g}':>16}" for m in MARGINS)
                  + "   (mean error / worst raise over held)")
-    for group, label in sorted({(k[0], k[2]) for k in rows}, key=lambda k: (k[0], -int(k[1]))):
-        chosen = [s for k, s in rows.items() if k[0] == group and k[2] == label]
+    for group, label, chosen in runs.by_light_set(rows):
         cells = []
         for margin in MARGINS:
             final = [s["free"] if s["nz"]["free"] > s["nz"]["held"] + margin else s["held"] for s in chosen]
@@ -144,14 +149,8 @@ def main():
     torch.set_num_threads(args.threads)
     out = args.out or args.cache / "free_fits"
     runs.claim(out, {"scenes": scenes.SCENE_VERSION, "held": repr(HELD), "free": repr(FREE)})
-    rows = {}
     cases = benchmark.cases(args.only, args.sets, args.data, args.cache, args.names)
-    for group, name, label, result, ran in runs.kept_or_run(cases, out, run_case, args.report):
-        s = rows[group, name, label] = summarise(result)
-        if ran:
-            print(f"{group} {name} {label}: start {s['start']:.2f}° held {s['held']:.2f}° free "
-                  f"{s['free']:.2f}° ({result['seconds']:.0f} s)", flush=True)
-    print(report(rows))
+    print(report(runs.summaries(cases, out, run_case, summarise, progress, args.report)))
 
 
 if __name__ == "__main__":

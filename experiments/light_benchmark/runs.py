@@ -25,15 +25,26 @@ def claim(out: Path, made_with) -> None:
     recorded.write_text(json.dumps(made_with) + "\n")
 
 
-def kept_or_run(cases, out: Path, run, report_only: bool = False):
-    """For each case of :func:`benchmark.cases` (group, name, label, read), its result as kept in
-    run folder ``out``, or, where it has not run yet, ``run(read())`` kept there (skipped when
-    ``report_only``). Yields (group, name, label, result, ran_now)."""
+def summaries(cases, out: Path, run, summarise, progress, report_only: bool = False) -> dict:
+    """{(group, name, label): summarise(result)} for each case of :func:`benchmark.cases`: its
+    result as kept in run folder ``out``, or, where it has not run yet, ``run(read())`` kept
+    there, with the line ``progress(case, summary, result)`` printed (skipped when
+    ``report_only``)."""
+    rows = {}
     for group, name, label, read in cases:
         path = out / f"{group}-{name}-{label}.json"
         if path.is_file():
-            yield group, name, label, json.loads(path.read_text()), False
+            rows[group, name, label] = summarise(json.loads(path.read_text()))
         elif not report_only:
             result = run(read())
             path.write_text(json.dumps(result))
-            yield group, name, label, result, True
+            summary = rows[group, name, label] = summarise(result)
+            print(progress((group, name, label), summary, result), flush=True)
+    return rows
+
+
+def by_light_set(rows: dict):
+    """(group, label, [summary, …]) for each group and light set of ``rows`` (keyed by (group,
+    name, label)), groups in name order, light sets from the most lights down."""
+    for group, label in sorted({(k[0], k[2]) for k in rows}, key=lambda k: (k[0], -int(k[1]))):
+        yield group, label, [s for k, s in rows.items() if k[0] == group and k[2] == label]

@@ -92,6 +92,12 @@ def summarise(result: dict) -> dict:
             "agreement": agreement(arrays["reversal"], arrays["full"], arrays["halves"])}
 
 
+def progress(case: tuple, s: dict, result: dict) -> str:
+    """The line printed when a case has run."""
+    return (f"{' '.join(case)}: network {s['network']:.2f}° selfcal {s['full']:.2f}° agreement "
+            f"{s['agreement']:+.2f} ({result['seconds']:.0f} s)")
+
+
 def report(rows: dict) -> str:
     """Per case the errors and agreement; per light count the rule 'keep the fit where the halves
     agree at least this much' against keeping every fit."""
@@ -120,8 +126,7 @@ def report(rows: dict) -> str:
     lines.append(f"\n{'group':<9} {'set':>4} {'cases':>5} {'network':>8} {'keep all':>8} "
                  + " ".join(f"{f'agree≥{t:g}':>10}" for t in AGREEMENT_LEVELS)
                  + "   (mean final error / fits kept)")
-    for group, label in sorted({(k[0], k[2]) for k in rows}, key=lambda k: (k[0], -int(k[1]))):
-        chosen = [s for k, s in rows.items() if k[0] == group and k[2] == label]
+    for group, label, chosen in runs.by_light_set(rows):
         cells = []
         for level in AGREEMENT_LEVELS:
             final = [s["full"] if s["agreement"] >= level else s["reversal"] for s in chosen]
@@ -158,17 +163,12 @@ def main():
                          "stages": ["reversal", "selfcal"], "settings": args.settings})
     except (ValueError, TypeError, SyntaxError) as e:
         parser.error(str(e))
+
     def run(subject):
         return run_case(subject, selfcal)
 
-    rows = {}
     cases = benchmark.cases(args.only, args.sets, args.data, args.cache, args.names)
-    for group, name, label, result, ran in runs.kept_or_run(cases, out, run, args.report):
-        s = rows[group, name, label] = summarise(result)
-        if ran:
-            print(f"{group} {name} {label}: network {s['network']:.2f}° selfcal {s['full']:.2f}° "
-                  f"agreement {s['agreement']:+.2f} ({result['seconds']:.0f} s)", flush=True)
-    print(report(rows))
+    print(report(runs.summaries(cases, out, run, summarise, progress, args.report)))
 
 
 if __name__ == "__main__":
