@@ -389,7 +389,7 @@ def test_highlight_study_applies_each_variant_and_restores_the_shipped_threshold
     assert tuple(getattr(highlights, name) for name in study.THRESHOLDS) == shipped
 
 
-def test_free_fit_study_finds_a_shared_transform_and_the_elevation_stretch():
+def test_free_fit_study_finds_a_shared_transform_its_bas_relief_and_the_elevation_stretch():
     study = load_script("lb_free_fits", "experiments/light_benchmark/free_fits.py")
     rng = np.random.default_rng(0)
     polar, azimuth = np.radians(rng.uniform(5, 40, 30)), rng.uniform(0, 2 * np.pi, 30)
@@ -408,6 +408,13 @@ def test_free_fit_study_finds_a_shared_transform_and_the_elevation_stretch():
                       np.cos(1.2 * polar)], 1)
     assert study.elevation_stretch(start, wider) == pytest.approx(1.2)
     assert study.elevation_stretch(start, start) == pytest.approx(1.0)
+    lights_bas_relief = start @ np.array([[1, 0, 0.2], [0, 1, -0.1], [0, 0, 0.8]])   # z' = μx + νy + λz
+    lights_bas_relief /= np.linalg.norm(lights_bas_relief, axis=1, keepdims=True)
+    assert degrees(study.bas_relief_only(start, lights_bas_relief), lights_bas_relief) < 0.01
+    turn = np.radians(10.0)                                                  # about the x axis: no bas-relief
+    turned = start @ np.array([[1, 0, 0], [0, np.cos(turn), np.sin(turn)], [0, -np.sin(turn), np.cos(turn)]])
+    assert degrees(study.bas_relief_only(start, turned), turned) > 2
+    assert degrees(study.frame_only(start, turned), turned) < 0.5
 
 
 def test_error_by_angle_splits_the_mean_into_bands_that_add_up():

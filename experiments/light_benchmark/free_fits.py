@@ -12,6 +12,9 @@ the free fits measured). It reports, per case:
   *frame*: a rotation, a bas-relief, a stretch of the elevations), against the truth;
 - the *elevation stretch* of the network: the factor on the lights' angles from the view that
   best maps the start's onto the true ones (1: the spread of the elevations is right);
+- how much of the start's own error is one transform of all its lights, read off the truth: the
+  error left after the 3×3 transform, and after the bas-relief (μ, ν, λ), that bring the start
+  nearest the true lights;
 - the mean n_z, on the object's outline, of the robust initialisation's normals under each set of
   lights, and what keeping the free fit only where it raises that n_z would give.
 
@@ -29,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
+from scipy.optimize import least_squares
 
 from unps.lightnet.estimate import network_lights
 from unps.lights.reversal import ReversalTest
@@ -81,6 +85,16 @@ def frame_only(start: np.ndarray, fitted: np.ndarray, rounds: int = 50) -> np.nd
     return moved / np.linalg.norm(moved, axis=1, keepdims=True)
 
 
+def bas_relief_only(start: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """(n, 3) unit directions: the bas-relief s_i ↦ (s_x, s_y, μ s_x + ν s_y + λ s_z) of all of
+    ``start`` (n, 3) whose directions come nearest ``target``'s (least squares from the identity),
+    applied."""
+    def moved(p: np.ndarray) -> np.ndarray:
+        out = start @ np.array([[1.0, 0.0, p[0]], [0.0, 1.0, p[1]], [0.0, 0.0, p[2]]])
+        return out / np.linalg.norm(out, axis=1, keepdims=True)
+    return moved(least_squares(lambda p: (moved(p) - target).ravel(), [0.0, 0.0, 1.0]).x)
+
+
 def elevation_stretch(start: np.ndarray, truth: np.ndarray) -> float:
     """The factor k minimising Σ (k·θ_start − θ_true)² over the lights' angles θ from the view."""
     def polar(d):
@@ -94,7 +108,11 @@ def summarise(result: dict) -> dict:
     and outline n_z."""
     d = {k: np.asarray(result[k], np.float64) for k in ("truth", "start", "held", "free")}
     error = {k: float(angular_error(d[k], d["truth"]).mean()) for k in ("start", "held", "free")}
-    return {**error, "frame": float(angular_error(frame_only(d["start"], d["free"]), d["truth"]).mean()),
+    def error_after(moved: np.ndarray) -> float:
+        return float(angular_error(moved, d["truth"]).mean())
+    return {**error, "frame": error_after(frame_only(d["start"], d["free"])),
+            "nearest_3x3": error_after(frame_only(d["start"], d["truth"])),
+            "nearest_gbr": error_after(bas_relief_only(d["start"], d["truth"])),
             "stretch": elevation_stretch(d["start"], d["truth"]), "nz": result["outline_nz"]}
 
 
@@ -107,12 +125,14 @@ def progress(case: tuple, s: dict, result: dict) -> str:
 def report(rows: dict) -> str:
     """Per case, then per light count: the fits' errors and the outline rule."""
     lines = [f"{'group':<9} {'case':<12} {'set':>3} {'start':>7} {'held':>7} {'free':>7} {'frame':>7} "
-             f"{'stretch':>7}   outline n_z: {'truth':>6} {'start':>6} {'held':>6} {'free':>6}"]
+             f"{'stretch':>7}   outline n_z: {'truth':>6} {'start':>6} {'held':>6} {'free':>6}   "
+             f"start nearest the truth: {'3×3':>7} {'GBR':>7}"]
     for (group, name, label), s in rows.items():
         nz = s["nz"]
         lines.append(f"{group:<9} {name:<12} {label:>3} {s['start']:>6.2f}° {s['held']:>6.2f}° "
                      f"{s['free']:>6.2f}° {s['frame']:>6.2f}° {s['stretch']:>7.2f}                "
-                     f"{nz['truth']:>6.3f} {nz['start']:>6.3f} {nz['held']:>6.3f} {nz['free']:>6.3f}")
+                     f"{nz['truth']:>6.3f} {nz['start']:>6.3f} {nz['held']:>6.3f} {nz['free']:>6.3f}   "
+                     f"{'':>24} {s['nearest_3x3']:>6.2f}° {s['nearest_gbr']:>6.2f}°")
     lines.append(f"\n{'group':<9} {'set':>4} {'cases':>5} {'start':>7} {'held':>7} {'free':>7} "
                  + " ".join(f"{f'n_z +{m:g}':>16}" for m in MARGINS)
                  + "   (mean error / worst raise over held)")
@@ -125,6 +145,12 @@ def report(rows: dict) -> str:
         means = [np.mean([s[k] for s in chosen]) for k in ("start", "held", "free")]
         lines.append(f"{group:<9} {label:>4} {len(chosen):>5} " + " ".join(f"{m:>6.2f}°" for m in means)
                      + " " + " ".join(cells))
+    lines.append(f"\nthe start's error, and what is left of it after the one transform of all its lights "
+                 f"that brings them nearest the truth:\n{'group':<9} {'set':>4} {'cases':>5} {'start':>7} "
+                 f"{'3×3':>7} {'GBR':>7}")
+    for group, label, chosen in runs.by_light_set(rows):
+        means = [np.mean([s[k] for s in chosen]) for k in ("start", "nearest_3x3", "nearest_gbr")]
+        lines.append(f"{group:<9} {label:>4} {len(chosen):>5} " + " ".join(f"{m:>6.2f}°" for m in means))
     stretches = np.array([s["stretch"] for k, s in rows.items() if k[0] == "benchmark"])
     if len(stretches):
         lines.append(f"\nnetwork's elevation stretch on the benchmark: median {np.median(stretches):.2f}, "
