@@ -95,6 +95,31 @@ def cases(groups, sets, data: Path, cache: Path, names=None):
                 yield "synthetic", name, str(100), lambda name=name: synthetic(name)
 
 
+def study_parser(description: str, out_help: str, groups=GROUPS) -> argparse.ArgumentParser:
+    """The command line the light benchmark's studies share: where the data, captures and results
+    are, which cases (``groups`` by default), ``--report`` and ``--threads`` (default 1)."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
+    parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
+    parser.add_argument("--out", type=Path, default=None, help=out_help)
+    parser.add_argument("--only", nargs="+", choices=GROUPS, default=list(groups))
+    parser.add_argument("--sets", nargs="+", choices=list(scenes.LIGHT_SETS), default=list(scenes.LIGHT_SETS))
+    parser.add_argument("--names", nargs="*", help="only these objects or subjects")
+    parser.add_argument("--report", action="store_true", help="print the tables from the cases run so far")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
+    return parser
+
+
+def study_cases(args):
+    """The cases a study's parsed ``args`` (:func:`study_parser`) ask for, with logging quiet and
+    torch on ``args.threads`` threads."""
+    import torch
+
+    logging.basicConfig(level=logging.ERROR, format="%(name)s: %(message)s")
+    torch.set_num_threads(args.threads)
+    return cases(args.only, args.sets, args.data, args.cache, args.names)
+
+
 def synthetic(name: str):
     return instantiate_node(["fit"], [f"subject={name}"], "subject")()
 

@@ -24,8 +24,6 @@ None of it feeds training.
 
 from __future__ import annotations
 
-import argparse
-import logging
 import sys
 import time
 from pathlib import Path
@@ -160,24 +158,13 @@ def report(rows: dict) -> str:
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--data", type=Path, default=benchmark.DEFAULT_DATA)
-    parser.add_argument("--cache", type=Path, default=benchmark.DEFAULT_CACHE)
-    parser.add_argument("--out", type=Path, default=None, help="default: <cache>/free_fits")
-    parser.add_argument("--only", nargs="+", choices=benchmark.GROUPS, default=["benchmark", "diligent"])
-    parser.add_argument("--sets", nargs="+", choices=list(scenes.LIGHT_SETS), default=list(scenes.LIGHT_SETS))
-    parser.add_argument("--names", nargs="*", help="only these objects or subjects")
-    parser.add_argument("--report", action="store_true", help="print the tables from the cases run so far")
-    parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
+    parser = benchmark.study_parser(__doc__.split("\n")[0], "default: <cache>/free_fits",
+                                    groups=("benchmark", "diligent"))
     args = parser.parse_args()
-    logging.basicConfig(level=logging.ERROR, format="%(name)s: %(message)s")
-    import torch
-    torch.set_num_threads(args.threads)
+    cases = benchmark.study_cases(args)
     out = args.out or args.cache / "free_fits"
     runs.claim(out, {"scenes": scenes.SCENE_VERSION, "held": repr(HELD), "free": repr(FREE)})
-    cases = benchmark.cases(args.only, args.sets, args.data, args.cache, args.names)
     print(report(runs.summaries(cases, out, run_case, summarise, progress, args.report)))
-
 
 if __name__ == "__main__":
     main()

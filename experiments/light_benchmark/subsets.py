@@ -22,9 +22,7 @@ None of it feeds training.
 
 from __future__ import annotations
 
-import argparse
 import ast
-import logging
 import sys
 import time
 from pathlib import Path
@@ -139,22 +137,12 @@ def report(rows: dict) -> str:
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--data", type=Path, default=benchmark.DEFAULT_DATA)
-    parser.add_argument("--cache", type=Path, default=benchmark.DEFAULT_CACHE)
-    parser.add_argument("--out", type=Path, default=None, help="default: <cache>/subsets/<tag>")
-    parser.add_argument("--only", nargs="+", choices=benchmark.GROUPS, default=list(benchmark.GROUPS))
-    parser.add_argument("--sets", nargs="+", choices=list(scenes.LIGHT_SETS), default=list(scenes.LIGHT_SETS))
-    parser.add_argument("--names", nargs="*", help="only these objects or subjects")
+    parser = benchmark.study_parser(__doc__.split("\n")[0], "default: <cache>/subsets/<tag>")
     parser.add_argument("--set", dest="settings", nargs="*", default=[],
                         help="self-calibration settings, e.g. prior_weight=0.001")
     parser.add_argument("--tag", default="default", help="names the results folder")
-    parser.add_argument("--report", action="store_true", help="print the table from the cases run so far")
-    parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
     args = parser.parse_args()
-    logging.basicConfig(level=logging.ERROR, format="%(name)s: %(message)s")
-    import torch
-    torch.set_num_threads(args.threads)
+    cases = benchmark.study_cases(args)
     out = args.out or args.cache / "subsets" / args.tag
     try:
         settings = {key: ast.literal_eval(value) for key, value in (s.split("=", 1) for s in args.settings)}
@@ -167,7 +155,6 @@ def main():
     def run(subject):
         return run_case(subject, selfcal)
 
-    cases = benchmark.cases(args.only, args.sets, args.data, args.cache, args.names)
     print(report(runs.summaries(cases, out, run, summarise, progress, args.report)))
 
 
