@@ -36,7 +36,7 @@ from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet
 from unps.inverse.pixels import NOISE_LIMIT, neighbour_pairs, noise_level, refine_pixel_normals
 from unps.inverse.settings import InterreflectionModel, Preset
-from unps.inverse.system import InverseRendering
+from unps.inverse.system import DARK_SHARE, InverseRendering
 from unps.metrics import angular_error
 from unps.solvers.nayar import reflectance_scale
 from unps.solvers.rpca import robust_init
@@ -92,6 +92,11 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
         system, scale = build_system(work, light_directions, preset, interreflection, refine_lights,
                                      fingerprint(work, light_directions, settings), usable, device)
     solver = system.interreflection
+    dark_share = float((system.dark_weight > 0).sum() / system.mask.sum()) if schedule.dark_hold > 0 else None
+    if dark_share:
+        log.info("%.1f%% of the object is of a dark material (albedo under %.0f%% of its median): held "
+                 "toward the initialisation after the prior (preset.dark_hold=%g)",
+                 100 * dark_share, 100 * DARK_SHARE, schedule.dark_hold)
     parameters = sum(p.numel() for p in system.parameters() if p.requires_grad)
     log.info("networks: %.2f M parameters; %d steps", parameters / 1e6, schedule.steps)
 
@@ -138,7 +143,8 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
             "interreflection": interreflection.enabled,
             "facet_downsample": solver.factor if solver else None,
             "interreflection_bend_deg": bend["mean"] if bend else None, "moved_from_start_deg": moved,
-            "black_share": black_share, "image_noise": image_noise, "highlight_share": highlight_share}
+            "black_share": black_share, "image_noise": image_noise, "highlight_share": highlight_share,
+            "dark_share": dark_share}
     rendering = Rendering(work.mask, work.images, rendering["reconstruction"], rendering["reflectance"])
     return Estimate(normals, albedo, light_directions=directions if refine_lights else None,
                     light_scales=scales if refine_lights else None, rendering=rendering, info=info)

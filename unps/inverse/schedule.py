@@ -32,6 +32,10 @@ class Schedule:
             ``sqrt``, divided by the square root of that brightness (half-way, in log terms), or
             ``albedo``, divided by the initialisation's albedo (floored alike): the residual in
             shading units, which weighs a dark material up but not a pixel the shape keeps dark.
+        dark_hold: beyond the paper, the weight of a pull ‖N_o − N_init‖² that stays on after
+            ``prior_steps`` on the pixels of a dark material, each by its
+            :func:`unps.inverse.system.dark_weight`: there the images hardly pin the normals, and
+            once the prior ends the reflectance network can explain them with any. 0: off.
     """
 
     steps: int = 1000
@@ -45,6 +49,7 @@ class Schedule:
     prior_steps: int = 50
     update_every: int = 100
     residual: str = "absolute"
+    dark_hold: float = 0.1
 
     def __post_init__(self):
         if self.residual not in RESIDUALS:
@@ -65,7 +70,7 @@ class Schedule:
         if self.pixel_keep > 1:
             raise InputError(f"preset.pixel_keep is a share of the object's pixels, in (0, 1]; got "
                              f"{self.pixel_keep}")
-        for name in ("input_noise_var", "prior_weight"):
+        for name in ("input_noise_var", "prior_weight", "dark_hold"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and value >= 0):
                 raise InputError(f"preset.{name} must be a number >= 0, got {value!r}")

@@ -91,6 +91,34 @@ def residual_weight(images: torch.Tensor, mask: torch.Tensor, residual: str,
     return weight * mask * mask.sum() / (weight * mask).sum()
 
 
+DARK_SHARE = 0.2
+"""A pixel whose initial albedo is under this share of the object's median is of a dark material
+(black phenolic beside white paint), held toward N_init by ``preset.dark_hold``."""
+
+
+def dark_weight(albedo: torch.Tensor | None, mask: torch.Tensor, share: float = DARK_SHARE) -> torch.Tensor:
+    """Each pixel's weight in the hold toward N_init (``preset.dark_hold``): 1 − albedo / (``share``
+    × the object's median albedo), clamped to [0, 1]: 1 where the albedo is 0, none from ``share``
+    of the median up, and 0 off the object.
+
+    Args:
+        albedo: (1, 1, H, W) the initialisation's albedo (any scale); None: nothing is held.
+        mask: (1, 1, H, W) float, 1 on the object.
+
+    Returns:
+        (1, 1, H, W) weights in [0, 1].
+
+    Example:
+        >>> albedo = torch.tensor([0.0, 0.05, 0.1, 0.5, 1.0, 1.0, 1.0]).view(1, 1, 1, 7)
+        >>> dark_weight(albedo, torch.ones(1, 1, 1, 7)).flatten().tolist()    # median 0.5
+        [1.0, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0]
+    """
+    if albedo is None:
+        return torch.zeros_like(mask)
+    least = share * albedo[mask > 0].median()
+    return (1 - albedo / least.clamp_min(1e-12)).clamp(0, 1) * mask
+
+
 class InverseRendering(L.LightningModule):
     """Loss, optimiser and logging of one subject's fit.
 
@@ -101,6 +129,9 @@ class InverseRendering(L.LightningModule):
     reflectance network can explain the images with any of them; Taniai & Maehara found a weight
     of 0.1 for 50 of 1000 steps enough to start in the robust initialisation's basin, and short
     enough not to keep its errors (shadows and highlights the reflectance maps then explain).
+    After it, ``dark_hold``·Σ w‖N_o − N_init‖² / (object pixels) keeps the pixels of a dark
+    material near N_init, w their :func:`dark_weight` (beyond the paper): the L1 loss hardly feels
+    their normals, and a network shared with a bright material moves them at will.
 
     Args:
         normal_net, reflectance_net: the networks.
@@ -116,7 +147,8 @@ class InverseRendering(L.LightningModule):
         fingerprint: identifies the run; stored in checkpoints so a resume cannot mix runs.
         usable: (n, 1, H, W) 1 where a value may enter the loss, 0 where it is clipped; None: all.
         shadows: render the shadows that the current surface casts (V_i above).
-        albedo: (1, 1, H, W) the initialisation's albedo, for ``preset.residual=albedo``.
+        albedo: (1, 1, H, W) the initialisation's albedo, for ``preset.residual=albedo`` and the
+            hold on dark materials.
     """
 
     def __init__(self, normal_net: NormalNet, reflectance_net: ReflectanceNet, images: torch.Tensor,
@@ -147,6 +179,8 @@ class InverseRendering(L.LightningModule):
         self.register_buffer("first_bad", torch.tensor([-1.0, 0.0]), persistent=False)   # (step, loss)
         self.register_buffer("pixel_weight", residual_weight(images, self.mask, schedule.residual, albedo),
                              persistent=False)
+        self.register_buffer("dark_weight", dark_weight(albedo, self.mask), persistent=False)
+        self.holds_dark = schedule.dark_hold > 0 and bool(self.dark_weight.any())
         n = images.shape[0]
         self.light_offsets = torch.nn.Parameter(torch.zeros(n, 3), requires_grad=refine_lights)
         self.light_log_scales = torch.nn.Parameter(torch.zeros(n), requires_grad=refine_lights)
@@ -246,6 +280,11 @@ class InverseRendering(L.LightningModule):
                      ).sum() / self.mask.sum()
             loss = loss + s.prior_weight * prior
             self.log("loss/prior", prior)
+        elif self.holds_dark:
+            hold = (((out["normals"] - self.init_normals) ** 2).sum(1, keepdim=True) * self.dark_weight
+                    ).sum() / self.mask.sum()
+            loss = loss + s.dark_hold * hold
+            self.log("loss/dark_hold", hold)
         self.watch_divergence(loss)
         if self.true_normals is not None:
             self.log("mae", self.normal_mae(out["normals"].detach()))
