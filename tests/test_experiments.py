@@ -288,7 +288,8 @@ def test_nir_benchmark_reads_one_row_per_seed_and_averages(tmp_path):
         benchmark.unps_rows(tmp_path, "ball-gt-unps-fast", ["subject=ball", "preset.input_noise_var=0.3"], [0])
 
 
-def test_light_benchmark_normals_reads_finished_rows_and_refuses_mixed_settings(tmp_path):
+def test_light_benchmark_normals_reads_finished_rows_refuses_mixed_settings_and_keeps_light_sets_apart(
+        tmp_path):
     normals = load_script("lb_normals", "experiments/light_benchmark/normals.py")
     obj = normals.scenes.OBJECTS[0]
     (tmp_path / f"{obj.name}-rpca").mkdir()
@@ -301,6 +302,8 @@ def test_light_benchmark_normals_reads_finished_rows_and_refuses_mixed_settings(
     normals.runs.claim(tmp_path, ["preset.prior_weight=0"])
     with pytest.raises(ValueError, match=r'made with \["preset.prior_weight=0"\], not \[\]'):
         normals.runs.claim(tmp_path, [])
+    assert normals.run_folder(tmp_path, "default", "96") == tmp_path / "normals" / "default"
+    assert normals.run_folder(tmp_path, "default", "12") == tmp_path / "normals" / "default-12"
 
 
 def test_slant_script_remeasures_runs_and_their_seed_ensemble(tmp_path, capsys, monkeypatch):

@@ -3,11 +3,13 @@
     python experiments/light_benchmark/normals.py                       # 24 objects, 96 lights
     python experiments/light_benchmark/normals.py --set preset.prior_weight=0 --tag prior0
     python experiments/light_benchmark/normals.py --names blob03 goblet-a --methods unps
+    python experiments/light_benchmark/normals.py --lights 12 --methods unps --tag sparse
 
 The 24 objects of ``scenes.py`` (meshes and procedural shapes with cavities, thin parts and
 self-shadowing; two or three held-out MERL materials each; cast shadows and interreflections;
-8-bit ``floor`` / ``round`` or 16-bit storage with sensor noise), under their 96-light dome, with
-their true lights (``light=gt``): Woodham's least squares, the robust initialisation and the fit
+8-bit ``floor`` / ``round`` or 16-bit storage with sensor noise), under their 96-light dome (or
+their sparse set of 20 or 12 lights: ``--lights``), with their true lights (``light=gt``):
+Woodham's least squares, the robust initialisation and the fit
 (``method=unps``, the default preset), each one ``python -m unps.fit`` run in its own process in
 ``<out>/<object>-<method>/`` (a rerun skips finished rows and resumes a killed fit). The captures
 are rendered on first use into ``--cache``, as the light benchmark does. ``--set`` passes
@@ -39,7 +41,7 @@ import scenes  # noqa: E402
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
 DEFAULT_CACHE = Path("~/.cache/unps/light_benchmark").expanduser()
 METHODS = ("woodham", "rpca", "unps")
-LIGHT_SET = "96"
+LIGHT_SETS = ("96", "20", "12")
 
 
 def run_row(folder: Path, obj: scenes.BenchmarkObject, method: str, settings: list[str],
@@ -58,6 +60,16 @@ def run_row(folder: Path, obj: scenes.BenchmarkObject, method: str, settings: li
         if done.returncode != 0:
             sys.exit(f"{' '.join(command)} failed:\n{done.stderr[-2000:]}")
     return json.loads(metrics.read_text())
+
+
+def run_folder(cache: Path, tag: str, lights: str) -> Path:
+    """Where a tag's runs go: ``<cache>/normals/<tag>`` for the dome, ``<tag>-<lights>`` for a
+    sparse set, so that the same tag on another light set never reads the dome's rows.
+
+    >>> run_folder(Path("c"), "sparse", "12").as_posix(), run_folder(Path("c"), "default", "96").as_posix()
+    ('c/normals/sparse-12', 'c/normals/default')
+    """
+    return cache / "normals" / (tag if lights == "96" else f"{tag}-{lights}")
 
 
 def storage_means(storages: list[str], errors: dict[str, list[float]]) -> list[str]:
@@ -83,8 +95,10 @@ def main(argv=None) -> None:
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
     parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
     parser.add_argument("--out", type=Path, default=None,
-                        help="run folders (default: <cache>/normals/<tag>)")
+                        help="run folders (default: <cache>/normals/<tag>, <tag>-<lights> for a sparse set)")
     parser.add_argument("--tag", default="default", help="names the run folder")
+    parser.add_argument("--lights", choices=LIGHT_SETS, default="96",
+                        help="the light set: the dome (96) or a sparse rig (20, 12)")
     parser.add_argument("--names", nargs="+", default=None, help="objects (default: all 24)")
     parser.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS))
     parser.add_argument("--set", dest="settings", nargs="*", default=[],
@@ -96,7 +110,7 @@ def main(argv=None) -> None:
     unknown = sorted(set(args.names or ()) - known)
     if unknown:
         sys.exit(f"--names: {', '.join(unknown)} not among the objects ({', '.join(sorted(known))})")
-    out = args.out or args.cache / "normals" / args.tag
+    out = args.out or run_folder(args.cache, args.tag, args.lights)
     try:
         runs.claim(out, args.settings)
     except ValueError as e:
@@ -104,7 +118,7 @@ def main(argv=None) -> None:
 
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, "
           f"{'CUDA' if torch.cuda.is_available() else 'CPU'}; torch {torch.__version__}")
-    print(f"\nlight benchmark objects, {LIGHT_SET} lights, light=gt"
+    print(f"\nlight benchmark objects, {args.lights} lights, light=gt"
           f"{' ' + ' '.join(args.settings) if args.settings else ''} (normal MAE °)")
     header = f"{'object':<16}{'storage':>8}" + "".join(f"{m:>9}" for m in args.methods)
     print(header + (f"{'fit s':>8}" if "unps" in args.methods else ""))
@@ -113,7 +127,7 @@ def main(argv=None) -> None:
     for obj in scenes.OBJECTS:
         if args.names and obj.name not in args.names:
             continue
-        folder = scenes.make_captures(obj, args.data, args.cache)[LIGHT_SET]
+        folder = scenes.make_captures(obj, args.data, args.cache)[args.lights]
         rows = {m: run_row(folder, obj, m, args.settings, out) for m in args.methods}
         storages.append(obj.storage)
         line = f"{obj.name:<16}{obj.storage:>8}"
