@@ -166,5 +166,6 @@ def main():
     runs.claim(out, {"scenes": scenes.SCENE_VERSION, "held": repr(HELD), "free": repr(FREE)})
     print(report(runs.summaries(cases, out, run_case, summarise, progress, args.report)))
 
+
 if __name__ == "__main__":
     main()

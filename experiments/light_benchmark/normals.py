@@ -41,7 +41,6 @@ import scenes  # noqa: E402
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
 DEFAULT_CACHE = Path("~/.cache/unps/light_benchmark").expanduser()
 METHODS = ("woodham", "rpca", "unps")
-LIGHT_SETS = ("96", "20", "12")
 
 
 def run_row(folder: Path, obj: scenes.BenchmarkObject, method: str, settings: list[str],
@@ -64,11 +63,7 @@ def run_row(folder: Path, obj: scenes.BenchmarkObject, method: str, settings: li
 
 def run_folder(cache: Path, tag: str, lights: str) -> Path:
     """Where a tag's runs go: ``<cache>/normals/<tag>`` for the dome, ``<tag>-<lights>`` for a
-    sparse set, so that the same tag on another light set never reads the dome's rows.
-
-    >>> run_folder(Path("c"), "sparse", "12").as_posix(), run_folder(Path("c"), "default", "96").as_posix()
-    ('c/normals/sparse-12', 'c/normals/default')
-    """
+    sparse set, so that the same tag on another light set never reads the dome's rows."""
     return cache / "normals" / (tag if lights == "96" else f"{tag}-{lights}")
 
 
@@ -97,7 +92,7 @@ def main(argv=None) -> None:
     parser.add_argument("--out", type=Path, default=None,
                         help="run folders (default: <cache>/normals/<tag>, <tag>-<lights> for a sparse set)")
     parser.add_argument("--tag", default="default", help="names the run folder")
-    parser.add_argument("--lights", choices=LIGHT_SETS, default="96",
+    parser.add_argument("--lights", choices=list(scenes.LIGHT_SETS), default="96",
                         help="the light set: the dome (96) or a sparse rig (20, 12)")
     parser.add_argument("--names", nargs="+", default=None, help="objects (default: all 24)")
     parser.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS))

@@ -276,13 +276,11 @@ class InverseRendering(L.LightningModule):
         loss = residual.sum() / (keep.expand(count, 1, -1, -1).sum().clamp_min(1) * 3)
         self.log("loss/reconstruction", loss)
         if self.global_step < s.prior_steps and s.prior_weight > 0:
-            prior = (((out["normals"] - self.init_normals) ** 2).sum(1, keepdim=True) * self.mask
-                     ).sum() / self.mask.sum()
+            prior = self.pull_toward_start(out["normals"], self.mask)
             loss = loss + s.prior_weight * prior
             self.log("loss/prior", prior)
         elif self.holds_dark:
-            hold = (((out["normals"] - self.init_normals) ** 2).sum(1, keepdim=True) * self.dark_weight
-                    ).sum() / self.mask.sum()
+            hold = self.pull_toward_start(out["normals"], self.dark_weight)
             loss = loss + s.dark_hold * hold
             self.log("loss/dark_hold", hold)
         self.watch_divergence(loss)
@@ -292,6 +290,11 @@ class InverseRendering(L.LightningModule):
             self.log("light/offset_deg", torch.rad2deg(torch.acos(
                 (self.lights()[0] * self.initial_lights).sum(1).clamp(-1, 1))).mean())
         return loss
+
+    def pull_toward_start(self, normals: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
+        """Σ weight·‖N_o − N_init‖² over the pixels, divided by the object's pixel count;
+        ``normals`` (1, 3, H, W) N_o, ``weight`` (1, 1, H, W)."""
+        return (((normals - self.init_normals) ** 2).sum(1, keepdim=True) * weight).sum() / self.mask.sum()
 
     def watch_divergence(self, loss: torch.Tensor) -> None:
         """Note the first step whose loss is not finite, and stop the fit there before its next
