@@ -16,8 +16,8 @@ from unps.geometry import continue_surface
 from unps.grid import block_mean
 from unps.fit import fit
 from unps.inverse.pixels import NOISE_LIMIT
-from unps.inverse.fit import (FAR_FROM_START_DEG, build_system, distance_from_start, interreflection_bend,
-                              neural_inverse_rendering, solved_per_pixel, unit)
+from unps.inverse.fit import (FAR_FROM_START_DEG, build_system, distance_from_start, held_from_solve,
+                              interreflection_bend, neural_inverse_rendering, solved_per_pixel, unit)
 from unps.inverse.settings import InterreflectionModel, Preset
 from unps.inverse.grids import unclipped, upsample_normals, upsample_with_detail, working_factor
 from unps.inverse.interreflection import Interreflection
@@ -313,6 +313,47 @@ def test_after_the_prior_a_dark_material_stays_near_its_start_and_a_bright_one_m
     assert tiny_fit(painted).info["dark_share"] == pytest.approx(dark.sum() / sphere.mask.sum())
     assert tiny_fit(painted, dark_hold=0.0).info["dark_share"] is None
 
+
+
+def test_the_pixels_the_fit_held_dark_keep_the_fit_when_each_pixel_is_solved(sphere):
+    """The painted sphere fitted on a ×2 grid: its dark quarter, held toward N_init, is marked on
+    the subject's grid to keep the upsampled fit, the bright rest to be solved from its own images;
+    without the hold nothing is marked."""
+    quarter = sphere.resolution[1] // 4
+    shade = np.where(np.arange(sphere.resolution[1]) < quarter, 0.05, 1.0)
+    painted = sphere.replace(images=sphere.images * shade[None, None, :, None])
+    dark = sphere.mask.copy()
+    dark[:, quarter:] = False
+    work = painted.downsample(2)
+    for hold in (0.1, 0.0):
+        system, _ = build_system(work, work.light_directions, Preset.from_config(**TINY, dark_hold=hold),
+                                 InterreflectionModel(enabled=False), False, "test")
+        held = held_from_solve(system, work.mask, sphere.mask.shape, 2)
+        if hold:
+            assert held.shape == sphere.mask.shape
+            assert held[dark].mean() > 0.8 and not held[sphere.mask & ~dark].any()
+        else:
+            assert held is None
+
+
+def test_a_held_pixel_keeps_the_upsampled_fit_and_the_others_are_solved(caplog):
+    """Normals 6° off and clean images: the held left half keeps its start bit for bit, the right
+    half is put right, and the log counts the held pixels."""
+    sphere = render_lambertian("sphere", size=32, n_lights=24, seed=4)
+    tilt = np.array([np.sin(np.radians(6)), 0, np.cos(np.radians(6))])
+    start = np.where(sphere.mask[..., None], unit(sphere.normals + tilt - [0, 0, 1]), sphere.normals)
+    start = start.astype(np.float32)
+    held = sphere.mask.copy()
+    held[:, 16:] = False
+    _, coarse = block_mean(np.zeros((32, 32, 1)), sphere.mask, 2)
+    caplog.set_level("INFO")
+    normals, _ = solved_per_pixel(sphere.replace(light_intensities=None), start, np.zeros_like(start),
+                                  np.full((24, *coarse.shape, 3), 0.8, np.float32), sphere.light_directions,
+                                  np.ones(24, np.float32), coarse, 2, np.ones((24, 32, 32), bool), held)
+    np.testing.assert_array_equal(normals[held], start[held])
+    solved = sphere.mask & ~held
+    assert angular_error(normals, sphere.normals)[solved].mean() < 0.5
+    assert f"{held.sum()} of a dark material keep the fit" in caplog.text
 
 def sphere_system(prior_weight):
     subject = render_lambertian("sphere", size=24, n_lights=12, seed=1)

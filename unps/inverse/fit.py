@@ -46,6 +46,7 @@ from unps.timing import stage
 log = logging.getLogger(__name__)
 
 CROP_MARGIN = 4   # pixels of background kept around the object so convolutions see its edge
+HELD_FROM_SOLVE = 0.5   # a pixel held this hard toward N_init keeps the upsampled fit (held_from_solve)
 FAR_FROM_START_DEG = 20.0   # a fit that ends this far from its start, on average, is reported
 
 
@@ -118,9 +119,10 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
             upsampled = upsample_with_detail(normals, coarse_init, fine_init, work.mask, factor)
             if preset.refine_pixels:
                 interreflected = upsample_map(pseudo_normals - normals, work.mask, cropped.mask.shape, factor)
+                held = held_from_solve(system, work.mask, cropped.mask.shape, factor)
                 upsampled, image_noise = solved_per_pixel(cropped, upsampled, interreflected,
                                                           rendering["reflectance"], directions, scales,
-                                                          work.mask, factor, ~clipped)
+                                                          work.mask, factor, ~clipped, held)
             normals = upsampled
         highlight_share = None
         if preset.highlights:
@@ -150,9 +152,27 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
                     light_scales=scales if refine_lights else None, rendering=rendering, info=info)
 
 
+def held_from_solve(system: InverseRendering, work_mask: np.ndarray, shape: tuple[int, int],
+                    factor: int) -> np.ndarray | None:
+    """(H, W) bool on the subject's crop: the pixels of a dark material that the fit held toward
+    N_init (``preset.dark_hold``; their upsampled hold weight above :data:`HELD_FROM_SOLVE`), which
+    keep the upsampled fit instead of being solved from their own images — images that pin a dark
+    pixel's normal no better than they pinned it in the fit. None when the fit held no pixel.
+
+    Args:
+        system: the fitted system, its ``dark_weight`` (1, 1, h, w) on the working grid ``work_mask``,
+            ``factor`` times coarser than the crop's ``shape``.
+    """
+    if not system.holds_dark:
+        return None
+    weight = system.dark_weight[0].permute(1, 2, 0).cpu().numpy()
+    return upsample_map(weight, work_mask, shape, factor)[..., 0] > HELD_FROM_SOLVE
+
+
 def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.ndarray,
                      reflectance: np.ndarray, directions: np.ndarray, scales: np.ndarray,
-                     work_mask: np.ndarray, factor: int, usable: np.ndarray) -> tuple[np.ndarray, float]:
+                     work_mask: np.ndarray, factor: int, usable: np.ndarray,
+                     held: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """The upsampled fit's normals with each pixel's solved from its own images
     (:func:`unps.inverse.pixels.refine_pixel_normals`) under the fitted reflectance, upsampled.
 
@@ -168,6 +188,7 @@ def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.n
             ``factor`` times coarser), in the subject's units; directions: (n, 3) and scales: (n,)
             the lights the fit rendered with.
         usable: (n, H, W) bool, False for the clipped values the fit left out.
+        held: (H, W) bool, pixels that keep ``normals`` (:func:`held_from_solve`); None: none.
 
     Returns:
         (H, W, 3) unit normals on the crop's object — pixels the solve leaves out keep
@@ -188,10 +209,13 @@ def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.n
                     "(preset.refine_pixels solves each pixel only where the noise allows)", noise,
                     NOISE_LIMIT)
         return normals, noise
+    if held is not None:
+        ok &= ~held[mask]
     solved = np.where(ok[:, None], unit(solved - offset), start)
     log.info("each pixel's normal solved from its own images under the fitted reflectance: %d of %d "
              "pixels, %.2f° from the upsampled fit on average (image noise %.3f of the 99th "
-             "percentile)", ok.sum(), ok.size, float(angular_error(solved, start).mean()), noise)
+             "percentile%s)", ok.sum(), ok.size, float(angular_error(solved, start).mean()), noise,
+             "" if held is None else f"; {int(held[mask].sum())} of a dark material keep the fit")
     refined = normals.copy()
     refined[mask] = solved
     return refined, noise
