@@ -279,6 +279,15 @@ def test_the_albedo_residual_is_weighed_by_the_initialisations_albedo(sphere):
     assert np.median(weight[right]) / np.median(weight[left]) == pytest.approx(10, rel=0.05)
 
 
+def dark_quarter(sphere):
+    """``sphere`` with its left quarter painted 20 times darker, and that quarter's mask."""
+    quarter = sphere.resolution[1] // 4
+    shade = np.where(np.arange(sphere.resolution[1]) < quarter, 0.05, 1.0)
+    dark = sphere.mask.copy()
+    dark[:, quarter:] = False
+    return sphere.replace(images=sphere.images * shade[None, None, :, None]), dark
+
+
 def test_after_the_prior_a_dark_material_stays_near_its_start_and_a_bright_one_moves_as_before(sphere):
     """A sphere whose left quarter is painted 20 times darker, the prior on for 10 of 60 steps:
     with ``preset.dark_hold`` the dark quarter ends far nearer the initialisation than without,
@@ -286,11 +295,7 @@ def test_after_the_prior_a_dark_material_stays_near_its_start_and_a_bright_one_m
     ``dark_share`` is the dark quarter's share of the object."""
     import lightning as L
 
-    quarter = sphere.resolution[1] // 4
-    shade = np.where(np.arange(sphere.resolution[1]) < quarter, 0.05, 1.0)
-    painted = sphere.replace(images=sphere.images * shade[None, None, :, None])
-    dark = sphere.mask.copy()
-    dark[:, quarter:] = False
+    painted, dark = dark_quarter(sphere)
     bright = sphere.mask & ~dark
     moved = {}
     for hold in (0.0, 1.0):
@@ -314,16 +319,11 @@ def test_after_the_prior_a_dark_material_stays_near_its_start_and_a_bright_one_m
     assert tiny_fit(painted, dark_hold=0.0).info["dark_share"] is None
 
 
-
 def test_the_pixels_the_fit_held_dark_keep_the_fit_when_each_pixel_is_solved(sphere):
     """The painted sphere fitted on a ×2 grid: its dark quarter, held toward N_init, is marked on
     the subject's grid to keep the upsampled fit, the bright rest to be solved from its own images;
     without the hold nothing is marked."""
-    quarter = sphere.resolution[1] // 4
-    shade = np.where(np.arange(sphere.resolution[1]) < quarter, 0.05, 1.0)
-    painted = sphere.replace(images=sphere.images * shade[None, None, :, None])
-    dark = sphere.mask.copy()
-    dark[:, quarter:] = False
+    painted, dark = dark_quarter(sphere)
     work = painted.downsample(2)
     for hold in (0.1, 0.0):
         system, _ = build_system(work, work.light_directions, Preset.from_config(**TINY, dark_hold=hold),
