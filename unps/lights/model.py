@@ -115,6 +115,7 @@ class SelfCalibrationModel(nn.Module):
         self.light_residual = nn.Parameter(torch.zeros_like(self.scaled_lights))
         self.log_albedo = nn.Parameter(albedo.clamp_min(1e-6).log())
         self.lobe_logits = nn.Parameter(torch.full((len(sharpness),), -5.0))
+        self.log_tint = nn.Parameter(torch.zeros_like(self.scaled_lights))
 
     def frame(self) -> torch.Tensor:
         """(3, 3) A = [c_x | c_y | μ c_x + ν c_y + λ e_z], scaled to determinant ±1."""
@@ -128,6 +129,13 @@ class SelfCalibrationModel(nn.Module):
         scaled = (self.scaled_lights + self.light_residual) @ self.frame()
         length = scaled.norm(dim=-1)
         return scaled / length[:, None], (length.log() - length.log().mean()).exp()
+
+    def tints(self) -> torch.Tensor:
+        """(n, 3) each light's colour relative to the first guess's: geometric mean 1 over each
+        light's channels and over each channel's lights (the object's own colour is the
+        albedo's)."""
+        centred = self.log_tint - self.log_tint.mean(1, keepdim=True)
+        return (centred - centred.mean(0, keepdim=True)).exp()
 
     def normals(self) -> torch.Tensor:
         """(m, 3) unit normals of the current depth."""
@@ -159,4 +167,4 @@ class SelfCalibrationModel(nn.Module):
         radiance = self.log_albedo.exp()[:, None, :] + specular[..., None]
         if visible is not None:
             shading = shading * visible
-        return (intensities[None, :, None] * shading[..., None]) * radiance
+        return ((intensities[:, None] * self.tints())[None] * shading[..., None]) * radiance
