@@ -93,7 +93,8 @@ class DepthPyramid(nn.Module):
 
 
 class SelfCalibrationModel(nn.Module):
-    """Lights, depth, albedo and specular lobes of one subject on its working grid.
+    """Lights (directions, intensities and colours), depth, albedo and specular lobes of one
+    subject on its working grid.
 
     Args:
         scaled_lights: (n, 3) s̃_i, the first guess (direction × relative intensity).

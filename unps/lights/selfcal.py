@@ -166,7 +166,6 @@ def self_calibrate(subject: Subject, lights: Lights,
                      None if weight is None else weight.to(device),
                      None if ceiling is None else ceiling.to(device))
     directions, scales = (t.detach().cpu().numpy().astype(np.float64) for t in model.lights())
-    tints = model.tints().detach().cpu().numpy().astype(np.float64)
     if not (np.isfinite(loss) and np.all(np.isfinite(directions))):
         log.warning("self-calibration of %s diverged; keeping the first guess", subject.name)
         return lights, Verdict(settings.name, "declined", "the fit diverged", {"loss": loss})
@@ -182,7 +181,7 @@ def self_calibrate(subject: Subject, lights: Lights,
                     "estimate: the images and the network disagree, and either may be wrong; check "
                     "lights.png, and calibrate the lights (light=gt) if you can", moved)
     intensities = lights.intensities if lights.intensities is not None else np.ones((len(scales), 3))
-    intensities = intensities * scales[:, None] * tints
+    intensities = intensities * scales[:, None] * model.tints().detach().cpu().numpy()
     intensities = intensities / np.exp(np.log(intensities.mean(1)).mean())
     fitted = Lights(directions.astype(np.float32), intensities.astype(np.float32), "selfcal",
                     spread_deg=lights.spread_deg)
