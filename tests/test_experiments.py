@@ -294,7 +294,7 @@ def test_light_benchmark_normals_reads_finished_rows_refuses_mixed_settings_and_
     obj = normals.scenes.OBJECTS[0]
     (tmp_path / f"{obj.name}-rpca").mkdir()
     (tmp_path / f"{obj.name}-rpca" / "metrics.json").write_text(json.dumps({"normal_mae": 4.5}))
-    assert normals.run_row(tmp_path / "nowhere", obj, "rpca", [], tmp_path)["normal_mae"] == 4.5
+    assert normals.run_row(tmp_path / "nowhere", obj, "rpca", "gt", [], tmp_path)["normal_mae"] == 4.5
     lines = normals.storage_means(["png16", "floor8", "png16"], {"rpca": [1.0, 5.0, 2.0], "unps": [3.0, 4.0, 1.0]})
     assert [line.split() for line in lines] == [
         ["mean,", "png16", "(2)", "1.50°", "2.00°"], ["mean,", "floor8", "(1)", "5.00°", "4.00°"]]
@@ -302,6 +302,8 @@ def test_light_benchmark_normals_reads_finished_rows_refuses_mixed_settings_and_
     normals.runs.claim(tmp_path, ["preset.prior_weight=0"])
     with pytest.raises(ValueError, match=r'made with \["preset.prior_weight=0"\], not \[\]'):
         normals.runs.claim(tmp_path, [])
+    with pytest.raises(ValueError, match=r'not \["light=selfcal", "preset.prior_weight=0"\]'):
+        normals.runs.claim(tmp_path, normals.made_with("selfcal", ["preset.prior_weight=0"]))
     assert normals.run_folder(tmp_path, "default", "96") == tmp_path / "normals" / "default"
     assert normals.run_folder(tmp_path, "default", "12") == tmp_path / "normals" / "default-12"
 

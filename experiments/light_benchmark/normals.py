@@ -4,11 +4,14 @@
     python experiments/light_benchmark/normals.py --set preset.prior_weight=0 --tag prior0
     python experiments/light_benchmark/normals.py --names blob03 goblet-a --methods unps
     python experiments/light_benchmark/normals.py --lights 12 --methods unps --tag sparse
+    python experiments/light_benchmark/normals.py --light selfcal --methods unps --tag selfcal
 
 The 24 objects of ``scenes.py`` (meshes and procedural shapes with cavities, thin parts and
 self-shadowing; two or three held-out MERL materials each; cast shadows and interreflections;
 8-bit ``floor`` / ``round`` or 16-bit storage with sensor noise), under their 96-light dome (or
-their sparse set of 20 or 12 lights: ``--lights``), with their true lights (``light=gt``):
+their sparse set of 20 or 12 lights: ``--lights``), with their true lights (``light=gt``; or
+uncalibrated, the lights estimated as a user's run estimates them: ``--light selfcal``, the
+default of ``python -m unps.fit``, or ``--light estimated``, the network and the reversal test):
 Woodham's least squares, the robust initialisation and the fit
 (``method=unps``, the default preset), each one ``python -m unps.fit`` run in its own process in
 ``<out>/<object>-<method>/`` (a rerun skips finished rows and resumes a killed fit). The captures
@@ -41,17 +44,18 @@ import scenes  # noqa: E402
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
 DEFAULT_CACHE = Path("~/.cache/unps/light_benchmark").expanduser()
 METHODS = ("woodham", "rpca", "unps")
+LIGHTS = ("gt", "estimated", "selfcal")
 
 
-def run_row(folder: Path, obj: scenes.BenchmarkObject, method: str, settings: list[str],
-            out: Path) -> dict:
+def run_row(folder: Path, obj: scenes.BenchmarkObject, method: str, light: str,
+            settings: list[str], out: Path) -> dict:
     """One ``python -m unps.fit`` run (skipped when its metrics.json exists); its metrics."""
     run_dir = out / f"{obj.name}-{method}"
     metrics = run_dir / "metrics.json"
     if not metrics.is_file():
         command = [sys.executable, "-m", "unps.fit", "subject=folder", f"subject.root={folder}",
                    f"subject.name={obj.name}", f"subject.quantization={scenes.quantization(obj.storage)}",
-                   "light=gt", f"method={method}", f"hydra.run.dir={run_dir}",
+                   f"light={light}", f"method={method}", f"hydra.run.dir={run_dir}",
                    *(settings if method == "unps" else [])]
         print(f"  running {obj.name} {method}", flush=True)
         done = subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
@@ -59,6 +63,16 @@ def run_row(folder: Path, obj: scenes.BenchmarkObject, method: str, settings: li
         if done.returncode != 0:
             sys.exit(f"{' '.join(command)} failed:\n{done.stderr[-2000:]}")
     return json.loads(metrics.read_text())
+
+
+def made_with(light: str, settings: list[str]) -> list[str]:
+    """What a run folder records its rows as made with: the overrides, the light first where it is
+    not the true one (so that the folders of the true lights read as they always have).
+
+    >>> made_with("gt", ["preset.width=96"]), made_with("selfcal", [])
+    (['preset.width=96'], ['light=selfcal'])
+    """
+    return list(settings) if light == "gt" else [f"light={light}", *settings]
 
 
 def run_folder(cache: Path, tag: str, lights: str) -> Path:
@@ -94,6 +108,8 @@ def main(argv=None) -> None:
     parser.add_argument("--tag", default="default", help="names the run folder")
     parser.add_argument("--lights", choices=list(scenes.LIGHT_SETS), default="96",
                         help="the light set: the dome (96) or a sparse rig (20, 12)")
+    parser.add_argument("--light", choices=LIGHTS, default="gt",
+                        help="the true lights, or estimated as unps.fit estimates them")
     parser.add_argument("--names", nargs="+", default=None, help="objects (default: all 24)")
     parser.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS))
     parser.add_argument("--set", dest="settings", nargs="*", default=[],
@@ -107,23 +123,26 @@ def main(argv=None) -> None:
         sys.exit(f"--names: {', '.join(unknown)} not among the objects ({', '.join(sorted(known))})")
     out = args.out or run_folder(args.cache, args.tag, args.lights)
     try:
-        runs.claim(out, args.settings)
+        runs.claim(out, made_with(args.light, args.settings))
     except ValueError as e:
         parser.error(str(e))
 
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, "
           f"{'CUDA' if torch.cuda.is_available() else 'CPU'}; torch {torch.__version__}")
-    print(f"\nlight benchmark objects, {args.lights} lights, light=gt"
+    print(f"\nlight benchmark objects, {args.lights} lights, light={args.light}"
           f"{' ' + ' '.join(args.settings) if args.settings else ''} (normal MAE °)")
     header = f"{'object':<16}{'storage':>8}" + "".join(f"{m:>9}" for m in args.methods)
-    print(header + (f"{'fit s':>8}" if "unps" in args.methods else ""))
+    estimated = args.light != "gt"
+    print(header + (f"{'fit s':>8}" if "unps" in args.methods else "")
+          + (f"{'lights':>9}" if estimated else ""))
     errors: dict[str, list[float]] = {m: [] for m in args.methods}
+    light_errors: list[float] = []
     storages: list[str] = []
     for obj in scenes.OBJECTS:
         if args.names and obj.name not in args.names:
             continue
         folder = scenes.make_captures(obj, args.data, args.cache)[args.lights]
-        rows = {m: run_row(folder, obj, m, args.settings, out) for m in args.methods}
+        rows = {m: run_row(folder, obj, m, args.light, args.settings, out) for m in args.methods}
         storages.append(obj.storage)
         line = f"{obj.name:<16}{obj.storage:>8}"
         for method, metrics in rows.items():
@@ -131,8 +150,13 @@ def main(argv=None) -> None:
             line += f"{metrics['normal_mae']:>8.2f}°"
         if "unps" in rows:
             line += f"{rows['unps']['runtime_s']:>8.0f}"
+        if estimated:  # every method's run estimates the same lights; the first one's error
+            light_errors.append(next(iter(rows.values()))["light_dir_mae"])
+            line += f"{light_errors[-1]:>8.2f}°"
         print(line, flush=True)
-    print(f"{'mean':<24}" + "".join(f"{np.mean(e):>8.2f}°" for e in errors.values()))
+    print(f"{'mean':<24}" + "".join(f"{np.mean(e):>8.2f}°" for e in errors.values())
+          + ((f"{'':>8}" if "unps" in args.methods else "") + f"{np.mean(light_errors):>8.2f}°"
+             if estimated else ""))
     for line in storage_means(storages, errors):
         print(line)
     if "unps" in errors and len(args.methods) > 1:
