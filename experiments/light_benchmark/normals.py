@@ -11,7 +11,8 @@ self-shadowing; two or three held-out MERL materials each; cast shadows and inte
 8-bit ``floor`` / ``round`` or 16-bit storage with sensor noise), under their 96-light dome (or
 their sparse set of 20 or 12 lights: ``--lights``), with their true lights (``light=gt``; or
 uncalibrated, the lights estimated as a user's run estimates them: ``--light selfcal``, the
-default of ``python -m unps.fit``, or ``--light estimated``, the network and the reversal test):
+default of ``python -m unps.fit``, ``--light estimated``, the network and the reversal test, or
+``--light refine``, those lights learnt with the surface in the fit, ``method=unps`` only):
 Woodham's least squares, the robust initialisation and the fit
 (``method=unps``, the default preset), each one ``python -m unps.fit`` run in its own process in
 ``<out>/<object>-<method>/`` (a rerun skips finished rows and resumes a killed fit). The captures
@@ -44,7 +45,7 @@ import scenes  # noqa: E402
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
 DEFAULT_CACHE = Path("~/.cache/unps/light_benchmark").expanduser()
 METHODS = ("woodham", "rpca", "unps")
-LIGHTS = ("gt", "estimated", "selfcal")
+LIGHTS = ("gt", "estimated", "selfcal", "refine")
 
 
 def run_row(folder: Path, obj: scenes.BenchmarkObject, method: str, light: str,
@@ -121,6 +122,8 @@ def main(argv=None) -> None:
     unknown = sorted(set(args.names or ()) - known)
     if unknown:
         sys.exit(f"--names: {', '.join(unknown)} not among the objects ({', '.join(sorted(known))})")
+    if args.light == "refine" and set(args.methods) != {"unps"}:
+        parser.error("--light refine learns the lights in the fit: it needs --methods unps")
     out = args.out or run_folder(args.cache, args.tag, args.lights)
     try:
         runs.claim(out, made_with(args.light, args.settings))
