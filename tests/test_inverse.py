@@ -474,8 +474,28 @@ def test_a_diverging_fit_stops_with_a_clear_message(tmp_path, monkeypatch):
 def test_refined_lights_are_reported_and_need_method_unps(tmp_path):
     metrics = fit(config(tmp_path / "a", *tiny_overrides(), "light=refine"))
     assert metrics["light"] == "refine" and "light_dir_mae" in metrics
+    fitted = metrics["light_stages"][-1]
+    assert fitted["stage"] == "fit" and fitted["outcome"] == "changed" and fitted["evidence"]["moved_deg"] > 0
+    assert fitted["light_dir_mae"] == pytest.approx(metrics["light_dir_mae"])
     with pytest.raises(InputError, match="light=refine .* needs method=unps"):
         fit(config(tmp_path / "b", "subject=lambertian", "method=rpca", "light=refine"))
+
+
+def test_the_self_calibrated_lights_are_learnt_further_where_the_method_can(tmp_path):
+    from omegaconf import OmegaConf
+    from unps.pipeline.run import learns_lights
+
+    def nodes(*overrides):
+        cfg = config(tmp_path, *overrides)
+        return cfg.light, cfg.method
+
+    assert learns_lights(*nodes("light=selfcal", "method=unps"))
+    assert not learns_lights(*nodes("light=selfcal", "method=rpca"))
+    assert not learns_lights(*nodes("light=estimated", "method=unps"))
+    assert not learns_lights(*nodes("light=gt", "method=unps"))
+    assert learns_lights(*nodes("light=refine", "method=unps"))
+    with pytest.raises(InputError, match="light.refine=maybe: expected true, false or auto"):
+        learns_lights(OmegaConf.create({"refine": "maybe"}), nodes("method=unps")[1])
 
 
 def test_interreflection_off_and_in_memory_fits(sphere):

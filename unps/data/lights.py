@@ -22,7 +22,8 @@ class Verdict:
     """What one light stage did with the lights it was given.
 
     Attributes:
-        stage: the stage's name (``network``, ``reversal``, ``contour``, ``selfcal``).
+        stage: the stage's name (``network``, ``reversal``, ``contour``, ``selfcal``, or ``fit``
+            where the method learnt the lights further with the surface: ``light.refine``).
         outcome: ``changed`` (it returned other lights), ``kept`` (its evidence says the lights
             stand as they are) or ``declined`` (it could not decide, or its result failed its own
             check, so the lights pass through unchanged).

@@ -33,7 +33,7 @@ log = logging.getLogger(__name__)
 
 STAGES = ("reversal", "contour", "selfcal")
 LABELS = {"network": "light network", "reversal": "reversal test", "contour": "contour alignment",
-          "selfcal": "self-calibration"}
+          "selfcal": "self-calibration", "fit": "fit (light.refine)"}
 
 
 class LightStage(Protocol):

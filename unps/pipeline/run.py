@@ -15,11 +15,13 @@ from omegaconf import DictConfig, OmegaConf
 
 from unps.allocator import keep_freed_memory
 from unps.data.checks import check_light_span, collected_warnings, usable_subject
+from unps.data.lights import Verdict
 from unps.data.prepare import add_noise
 from unps.device import describe, peak_memory_gb, resolve_device
 from unps.errors import InputError
 from unps.geometry import integrate_normals
 from unps.lights import Lights, ground_truth, light_errors, with_lights
+from unps.lights.stages import record
 from unps.metrics import angular_error, normal_metrics
 from unps.threads import set_fit_threads
 from unps.timing import recording, stage
@@ -37,9 +39,10 @@ def launcher_config() -> dict | None:
     return OmegaConf.to_container(HydraConfig.get().launcher, resolve=True)
 
 
-def build(node: DictConfig) -> tuple[str, Any]:
+def build(node: DictConfig, **settled) -> tuple[str, Any]:
     """Instantiate a config-group node; its ``name`` labels it and is not passed to the target
-    (nor is ``refine``, which ``light=refine`` sets for the method rather than the estimator).
+    (nor is ``refine``, which the light settings hold for the method rather than the estimator).
+    ``settled`` replaces the node's values of those keys that it has.
 
     Nodes are partial (``_partial_: true``): the callable they give raises its own errors
     when called, rather than Hydra's wrapped instantiation error.
@@ -47,7 +50,30 @@ def build(node: DictConfig) -> tuple[str, Any]:
     spec = OmegaConf.to_container(node, resolve=True)
     name = spec.pop("name")
     spec.pop("refine", None)
+    spec.update({key: value for key, value in settled.items() if key in spec})
     return name, instantiate(spec)
+
+
+def learns_lights(light: DictConfig, method: DictConfig) -> bool:
+    """Whether the method learns the lights with the surface, as ``light.refine`` says: ``true``
+    (``light=refine``: the method must be one that can, method=unps), ``auto`` (``light=selfcal``:
+    where the method can) or ``false`` (absent: the same).
+
+    Raises:
+        InputError: ``light.refine`` is true and the method cannot learn lights, or it is none of
+            true, false, auto.
+    """
+    refine = light.get("refine", False)
+    can = "refine_lights" in method
+    if refine not in (True, False, "auto"):
+        raise InputError(f"light.refine={refine}: expected true, false or auto")
+    if refine is True and not can:
+        raise InputError(f"light=refine refines the lights inside the neural inverse rendering, "
+                         f"so it needs method=unps, not method={method.name}")
+    if refine == "auto" and not can:
+        log.info("method=%s takes the lights as the light stages leave them (light.refine=auto: "
+                 "method=unps would learn them further with the surface)", method.name)
+    return bool(refine) and can
 
 
 def fit(cfg: DictConfig) -> dict:
@@ -88,10 +114,7 @@ def run_fit(cfg: DictConfig, seconds: dict[str, float], warnings: list[str]) -> 
     subject, noise_reference = add_noise(subject, cfg.noise, seed=cfg.seed)
     original = subject
     light_name, light_source = build(cfg.light)
-    method_name, method = build(cfg.method)
-    if cfg.light.get("refine", False) and "refine_lights" not in cfg.method:
-        raise InputError(f"light=refine refines the lights inside the neural inverse rendering, "
-                         f"so it needs method=unps, not method={method_name}")
+    method_name, method = build(cfg.method, refine_lights=learns_lights(cfg.light, cfg.method))
     with stage("lights"):
         lights = light_source(subject)
     condition = check_light_span(lights.directions, f"the lights of {subject.name!r} ({light_name})",
@@ -115,11 +138,13 @@ def run_fit(cfg: DictConfig, seconds: dict[str, float], warnings: list[str]) -> 
     if estimate.light_directions is not None:
         intensities = (lights.intensities if lights.intensities is not None
                        else np.ones_like(lights.directions)) * estimate.light_scales[:, None]
-        lights = Lights(estimate.light_directions, intensities.astype(np.float32), "refined",
-                        spread_deg=lights.spread_deg, verdicts=lights.verdicts)
+        moved = float(np.degrees(np.arccos(np.clip(
+            (estimate.light_directions * lights.directions).sum(1), -1, 1))).mean())
+        lights = record(Lights(estimate.light_directions, intensities.astype(np.float32), "refined",
+                               spread_deg=lights.spread_deg, verdicts=lights.verdicts),
+                        Verdict("fit", "changed", f"learnt with the surface; directions moved "
+                                f"{moved:.2f}° on average", {"moved_deg": moved}), original)
         light_metrics = light_errors(lights, original)
-        if light_metrics:
-            log.info("refined lights: %s", ", ".join(f"{k} {v:.3f}" for k, v in light_metrics.items()))
 
     metrics = {"study": cfg.get("study"), "seed": cfg.seed,
                "subject": subject.name, "method": method_name, "light": light_name,
