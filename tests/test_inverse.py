@@ -8,6 +8,7 @@ import pytest
 import torch
 from conftest import TINY, rendered, tiny_fit
 from hydra import compose, initialize_config_module
+from omegaconf import OmegaConf
 
 from unps.data.analytic import render_lambertian
 from unps.errors import Diverged, InputError
@@ -24,6 +25,7 @@ from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet, normal_net_input, shading, specular_map
 from unps.inverse.system import InverseRendering, residual_weight, visibility
 from unps.metrics import angular_error
+from unps.pipeline.run import learns_lights
 
 NAYAR = dict(downsample=2, occlusion=True, albedo=None)
 
@@ -482,9 +484,6 @@ def test_refined_lights_are_reported_and_need_method_unps(tmp_path):
 
 
 def test_the_self_calibrated_lights_are_learnt_further_where_the_method_can(tmp_path):
-    from omegaconf import OmegaConf
-    from unps.pipeline.run import learns_lights
-
     def nodes(*overrides):
         cfg = config(tmp_path, *overrides)
         return cfg.light, cfg.method
