@@ -138,13 +138,12 @@ def run_fit(cfg: DictConfig, seconds: dict[str, float], warnings: list[str]) -> 
     if estimate.light_directions is not None:
         intensities = (lights.intensities if lights.intensities is not None
                        else np.ones_like(lights.directions)) * estimate.light_scales[:, None]
-        moved = float(np.degrees(np.arccos(np.clip(
-            (estimate.light_directions * lights.directions).sum(1), -1, 1))).mean())
+        moved = float(angular_error(estimate.light_directions, lights.directions).mean())
         lights = record(Lights(estimate.light_directions, intensities.astype(np.float32), "refined",
                                spread_deg=lights.spread_deg, verdicts=lights.verdicts),
                         Verdict("fit", "changed", f"learnt with the surface; directions moved "
                                 f"{moved:.2f}° on average", {"moved_deg": moved}), original)
-        light_metrics = light_errors(lights, original)
+        light_metrics = dict(lights.verdicts[-1].errors)
 
     metrics = {"study": cfg.get("study"), "seed": cfg.seed,
                "subject": subject.name, "method": method_name, "light": light_name,
