@@ -431,3 +431,19 @@ def test_error_by_angle_splits_the_mean_into_bands_that_add_up():
     assert [share for _, share, _, _ in rows[:5]] == [0.2] * 5
     assert sum(adds for _, _, _, adds in rows[:5]) == pytest.approx(error.mean())
     assert rows[5][1:] == (0.2, 40.0, 8.0)
+
+
+def test_light_moves_splits_a_move_of_the_lights_into_a_common_turn_and_the_rest():
+    study = load_script("lb_light_moves", "experiments/light_benchmark/light_moves.py")
+    truth = render_lambertian("sphere", size=8, n_lights=12, seed=1).light_directions
+    angle = np.radians(5)
+    about_x = np.array([[1, 0, 0], [0, np.cos(angle), -np.sin(angle)], [0, np.sin(angle), np.cos(angle)]])
+    turned = truth @ about_x.T
+    back = study.decompose(turned, truth, truth)         # a turn undone: all of it a turn
+    assert back["turn"] == pytest.approx(5, abs=1e-3) and back["turn_only"] < 1e-3
+    assert back["rest_only"] == pytest.approx(back["before"], abs=1e-3)
+    flatter = truth * [1, 1, 0.8]
+    flatter /= np.linalg.norm(flatter, axis=1, keepdims=True)
+    lowered = study.decompose(truth, flatter, truth)     # elevations lowered: no turn
+    assert lowered["turn"] < 0.2 * lowered["moved"]                          # measured 0.79° of 5.95°
+    assert lowered["rest_only"] == pytest.approx(lowered["after"], abs=0.1 * lowered["after"])

@@ -97,7 +97,8 @@ def test_batch_norm_reads_out_with_the_statistics_it_was_fitted_with():
     ("highlights", 0, "preset.highlights must be true or false, got 0"),
     ("init", "woodham", "preset.init must be one of robust, least_squares, got 'woodham'"),
     ("residual", "l2", "preset.residual must be one of absolute, sqrt, relative, albedo, got 'l2'"),
-    ("dark_hold", -0.1, "preset.dark_hold must be a number >= 0, got -0.1")])
+    ("dark_hold", -0.1, "preset.dark_hold must be a number >= 0, got -0.1"),
+    ("hold_light_frame", "yes", "preset.hold_light_frame must be true or false, got 'yes'")])
 def test_a_preset_names_a_bad_network_setting(field, value, message):
     with pytest.raises(InputError, match=re.escape(message)):
         Preset.from_config(**{field: value})
@@ -357,16 +358,18 @@ def test_a_held_pixel_keeps_the_upsampled_fit_and_the_others_are_solved(caplog):
     assert angular_error(normals, sphere.normals)[solved].mean() < 0.5
     assert f"{held.sum()} of a dark material keep the fit" in caplog.text
 
-def sphere_system(prior_weight):
+def sphere_system(prior_weight, refine_lights=False, light_directions=None, **preset):
     subject = render_lambertian("sphere", size=24, n_lights=12, seed=1)
+    lights = subject.light_directions if light_directions is None else light_directions
     images = torch.as_tensor(subject.images / subject.images[:, subject.mask].mean()).permute(0, 3, 1, 2)
     flat = np.zeros(subject.mask.shape + (3,), np.float32)
     flat[..., 2] = 1
-    preset = Preset.from_config(**{**TINY, "prior_weight": prior_weight, "pixel_keep": 1.0})
+    preset = Preset.from_config(**{**TINY, "prior_weight": prior_weight, "pixel_keep": 1.0, **preset})
     return InverseRendering(
         NormalNet(12, 16, 3, 1), ReflectanceNet(16, 8), images, subject.mask,
-        torch.as_tensor(subject.light_directions), torch.as_tensor(flat).permute(2, 0, 1), None,
-        preset.schedule, true_normals=torch.as_tensor(subject.normals).permute(2, 0, 1)), subject
+        torch.as_tensor(lights, dtype=torch.float32), torch.as_tensor(flat).permute(2, 0, 1), None,
+        preset.schedule, refine_lights=refine_lights,
+        true_normals=torch.as_tensor(subject.normals).permute(2, 0, 1)), subject
 
 
 def test_twenty_steps_on_a_tiny_sphere_lower_the_loss_and_the_error():
@@ -388,6 +391,33 @@ def test_twenty_steps_on_a_tiny_sphere_lower_the_loss_and_the_error():
     loss1, mae1 = state()
     assert loss1 < 0.8 * loss0         # measured: 10172 → 6983
     assert mae1 < 0.5 * mae0           # measured: 72° → 22°
+
+
+def common_rotation_deg(before: np.ndarray, after: np.ndarray) -> float:
+    """The angle of the rotation that best carries (n, 3) directions ``before`` onto ``after``."""
+    u, _, vt = np.linalg.svd(before.T @ after)
+    turn = vt.T @ np.diag([1, 1, np.sign(np.linalg.det(vt.T @ u.T))]) @ u.T
+    return float(np.degrees(np.arccos(np.clip((np.trace(turn) - 1) / 2, -1, 1))))
+
+
+def test_lights_learnt_in_the_fit_keep_their_frame_unless_it_is_freed():
+    """Lights handed to the fit turned 10° about the view axis: the fit may move each light, but
+    with ``hold_light_frame`` not all of them together; freed, it turns them."""
+    import lightning as L
+
+    turn = np.radians(10)
+    about_view = np.array([[np.cos(turn), -np.sin(turn), 0], [np.sin(turn), np.cos(turn), 0], [0, 0, 1]])
+    given = render_lambertian("sphere", size=24, n_lights=12, seed=1).light_directions @ about_view.T
+    rotation = {}
+    for hold in (True, False):
+        L.seed_everything(0, verbose=False)
+        system, _ = sphere_system(0.1, refine_lights=True, light_directions=given, hold_light_frame=hold)
+        L.Trainer(max_steps=60, logger=False, enable_checkpointing=False, enable_progress_bar=False,
+                  enable_model_summary=False).fit(system)
+        learnt = system.lights()[0].detach().numpy()
+        assert np.degrees(np.arccos(np.clip((learnt * given).sum(1), -1, 1))).mean() > 0.1   # 1.2° / 1.1°
+        rotation[hold] = common_rotation_deg(given, learnt)
+    assert rotation[True] < 0.05 and rotation[False] > 5 * rotation[True]     # measured: 0.003° / 0.18°
 
 
 def test_fit_writes_the_unps_outputs(tmp_path):

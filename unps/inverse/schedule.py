@@ -36,6 +36,11 @@ class Schedule:
             ``prior_steps`` on the pixels of a dark material, each by its
             :func:`unps.inverse.system.dark_weight`: there the images hardly pin the normals, and
             once the prior ends the reflectance network can explain them with any. 0: off.
+        hold_light_frame: beyond the paper, when the fit learns the lights (``light.refine``), it
+            learns no rotation that turns them all together
+            (:func:`unps.inverse.system.without_common_rotation`): the frame is the light
+            stages', and a frame turned with the normals renders the diffuse part of the images
+            alike, so the loss hardly tells it and the lights drift in it.
     """
 
     steps: int = 1000
@@ -50,6 +55,7 @@ class Schedule:
     update_every: int = 100
     residual: str = "absolute"
     dark_hold: float = 0.1
+    hold_light_frame: bool = True
 
     def __post_init__(self):
         if self.residual not in RESIDUALS:
@@ -70,6 +76,8 @@ class Schedule:
         if self.pixel_keep > 1:
             raise InputError(f"preset.pixel_keep is a share of the object's pixels, in (0, 1]; got "
                              f"{self.pixel_keep}")
+        if not isinstance(self.hold_light_frame, bool):
+            raise InputError(f"preset.hold_light_frame must be true or false, got {self.hold_light_frame!r}")
         for name in ("input_noise_var", "prior_weight", "dark_hold"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and value >= 0):

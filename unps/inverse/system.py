@@ -119,6 +119,32 @@ def dark_weight(albedo: torch.Tensor | None, mask: torch.Tensor, share: float = 
     return (1 - albedo / least.clamp_min(1e-12)).clamp(0, 1) * mask
 
 
+def without_common_rotation(offsets: torch.Tensor, lights: torch.Tensor) -> torch.Tensor:
+    """Light offsets less the part that turns all the lights together.
+
+    A small rotation ω of every light moves light i by ω × l_i; the ω whose moves are nearest
+    ``offsets`` in least squares solves Σ(I − l_i l_iᵀ) ω = Σ l_i × o_i, and its moves are taken
+    away. Linear in ``offsets``, so the gradient is projected alike.
+
+    Args:
+        offsets: (n, 3) additive offsets to the unit directions, camera frame.
+        lights: (n, 3) unit directions, camera frame; not all parallel.
+
+    Returns:
+        (n, 3) the offsets with no common rotation left (to first order).
+
+    Example:
+        >>> lights = torch.nn.functional.normalize(torch.tensor([[0., 0, 1], [1, 0, 1], [0, 1, 1]]), dim=1)
+        >>> turn = torch.cross(torch.tensor([0.01, -0.02, 0.03]).expand(3, 3), lights, dim=1)
+        >>> bool(without_common_rotation(turn, lights).abs().max() < 1e-7)
+        True
+    """
+    eye = torch.eye(3, dtype=lights.dtype, device=lights.device)
+    moment = (eye - lights[:, :, None] * lights[:, None, :]).sum(0)
+    omega = torch.linalg.solve(moment, torch.cross(lights, offsets, dim=1).sum(0))
+    return offsets - torch.cross(omega.expand_as(lights), lights, dim=1)
+
+
 class InverseRendering(L.LightningModule):
     """Loss, optimiser and logging of one subject's fit.
 
@@ -191,8 +217,13 @@ class InverseRendering(L.LightningModule):
     # -- the model -----------------------------------------------------------------------------
 
     def lights(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """(n, 3) unit directions and (n,) intensity scales with geometric mean 1."""
-        directions = F.normalize(self.initial_lights + self.light_offsets, dim=1)
+        """(n, 3) unit directions and (n,) intensity scales with geometric mean 1; with
+        ``hold_light_frame`` the directions keep the given lights' frame
+        (:func:`without_common_rotation`)."""
+        offsets = self.light_offsets
+        if self.schedule.hold_light_frame:
+            offsets = without_common_rotation(offsets, self.initial_lights)
+        directions = F.normalize(self.initial_lights + offsets, dim=1)
         scales = torch.exp(self.light_log_scales - self.light_log_scales.mean())
         return directions, scales
 
