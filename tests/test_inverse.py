@@ -24,6 +24,7 @@ from unps.inverse.grids import unclipped, upsample_normals, upsample_with_detail
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet, normal_net_input, shading, specular_map
 from unps.inverse.system import InverseRendering, residual_weight, visibility
+from unps.lights.contour import best_rotation, rotation_angle
 from unps.metrics import angular_error
 from unps.pipeline.run import learns_lights
 
@@ -393,13 +394,6 @@ def test_twenty_steps_on_a_tiny_sphere_lower_the_loss_and_the_error():
     assert mae1 < 0.5 * mae0           # measured: 72° → 22°
 
 
-def common_rotation_deg(before: np.ndarray, after: np.ndarray) -> float:
-    """The angle of the rotation that best carries (n, 3) directions ``before`` onto ``after``."""
-    u, _, vt = np.linalg.svd(before.T @ after)
-    turn = vt.T @ np.diag([1, 1, np.sign(np.linalg.det(vt.T @ u.T))]) @ u.T
-    return float(np.degrees(np.arccos(np.clip((np.trace(turn) - 1) / 2, -1, 1))))
-
-
 def test_lights_learnt_in_the_fit_keep_their_frame_unless_it_is_freed():
     """Lights handed to the fit turned 10° about the view axis: the fit may move each light, but
     with ``hold_light_frame`` not all of them together; freed, it turns them."""
@@ -416,7 +410,7 @@ def test_lights_learnt_in_the_fit_keep_their_frame_unless_it_is_freed():
                   enable_model_summary=False).fit(system)
         learnt = system.lights()[0].detach().numpy()
         assert np.degrees(np.arccos(np.clip((learnt * given).sum(1), -1, 1))).mean() > 0.1   # 1.2° / 1.1°
-        rotation[hold] = common_rotation_deg(given, learnt)
+        rotation[hold] = rotation_angle(best_rotation(given, learnt))
     assert rotation[True] < 0.05 and rotation[False] > 5 * rotation[True]     # measured: 0.003° / 0.18°
 
 

@@ -21,25 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
+from unps.lights.contour import best_rotation, rotation_angle
 from unps.metrics import angular_error
 from unps.report.figures import read_light_file
-
-
-def best_rotation(before: np.ndarray, after: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation R minimising Σ‖R b_i − a_i‖² over (n, 3) directions (Kabsch).
-
-    >>> turn = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
-    >>> lights = np.array([[0.0, 0, 1], [0.6, 0, 0.8], [0, 0.6, 0.8]])
-    >>> bool(np.allclose(best_rotation(lights, lights @ turn.T), turn))
-    True
-    """
-    u, _, vt = np.linalg.svd(before.T @ after)
-    return vt.T @ np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))]) @ u.T
-
-
-def rotation_angle(rotation: np.ndarray) -> float:
-    """Degrees turned by a (3, 3) rotation."""
-    return float(np.degrees(np.arccos(np.clip((np.trace(rotation) - 1) / 2, -1, 1))))
 
 
 def decompose(before: np.ndarray, after: np.ndarray, truth: np.ndarray) -> dict[str, float]:
