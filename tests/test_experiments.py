@@ -308,6 +308,20 @@ def test_light_benchmark_normals_reads_finished_rows_refuses_mixed_settings_and_
     assert normals.run_folder(tmp_path, "default", "12") == tmp_path / "normals" / "default-12"
 
 
+def test_light_benchmark_builds_and_runs_the_light_source_as_the_fit_does():
+    """The light benchmark's source is ``light=selfcal``'s as ``python -m unps.fit`` builds it
+    (``light.refine`` is the method's setting, not the estimator's), with its stages overridden."""
+    benchmark = load_script("lb_benchmark", "experiments/light_benchmark/benchmark.py")
+    source, names = benchmark.light_source(["reversal"], ["framings=[1.0]", "symmetric=false"])
+    assert names == ["reversal"]
+    subject = render_lambertian(shape="sphere", size=32, n_lights=8, seed=0)
+    result = benchmark.run_case(source, subject)
+    assert [s["stage"] for s in result["stages"]] == ["network", "reversal"]
+    assert result["n_images"] == 8 and np.isfinite(result["stages"][-1]["dir"])
+    with pytest.raises(InputError, match="not a light stage"):
+        benchmark.light_source(["bogus"], [])[0](subject)
+
+
 def test_slant_script_remeasures_runs_and_their_seed_ensemble(tmp_path, capsys, monkeypatch):
     """Two seeds of a fit, one 2° steeper and one 2° flatter than the truth: each reads ±2°, and
     their ensemble is the truth."""

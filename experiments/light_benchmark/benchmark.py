@@ -136,19 +136,21 @@ def instantiate_node(config: list[str], overrides: list[str], key: str):
 
 
 def light_source(stages: list[str] | None, settings: list[str]):
-    """``light=selfcal``'s light source as ``python -m unps.fit`` builds it, with these stages
-    and ``light.<key>=<value>`` overrides."""
+    """``light=selfcal``'s light source as ``python -m unps.fit`` builds it
+    (:func:`unps.pipeline.run.build`), with these stages and ``light.<key>=<value>`` overrides;
+    and the names of its stages."""
     overrides = ["light=selfcal", *(f"light.{s}" for s in settings)]
     if stages is not None:
         overrides.append(f"light.stages=[{','.join(stages)}]")
     from hydra import compose, initialize_config_module
-    from hydra.utils import instantiate
     from omegaconf import OmegaConf
 
+    from unps.pipeline.run import build
+
     with initialize_config_module("unps.conf", version_base=None):
-        node = OmegaConf.to_container(compose("fit", overrides=overrides).light, resolve=True)
-    node.pop("name")
-    return instantiate(node), node["stages"]
+        node = compose("fit", overrides=overrides).light
+    _, source = build(node)
+    return source, OmegaConf.to_container(node.stages)
 
 
 def run_case(source, subject) -> dict:
