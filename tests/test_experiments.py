@@ -461,3 +461,10 @@ def test_light_moves_splits_a_move_of_the_lights_into_a_common_turn_and_the_rest
     lowered = study.decompose(truth, flatter, truth)     # elevations lowered: no turn
     assert lowered["turn"] < 0.2 * lowered["moved"]                          # measured 0.79° of 5.95°
     assert lowered["rest_only"] == pytest.approx(lowered["after"], abs=0.1 * lowered["after"])
+    text = study.summary([back, lowered])
+    assert text.splitlines()[0].startswith("mean (2)")
+    # back's turn undoes its error; lowered starts from the truth, so its small turn and its rest raise it
+    assert ("the turn alone lowers the error on 1, raises it on 1; the rest alone lowers it on 0, "
+            "raises it on 1") in text
+    with pytest.raises(SystemExit):
+        study.main([])                                   # neither two folders nor --selfcal

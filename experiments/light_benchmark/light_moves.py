@@ -1,6 +1,7 @@
 """Where the fit's step on the lights goes: a common rotation of all of them, or the rest.
 
     python experiments/light_benchmark/light_moves.py BEFORE AFTER
+    python experiments/light_benchmark/light_moves.py --selfcal [--sets 12 20] [--only benchmark]
 
 BEFORE and AFTER are run folders of ``normals.py --light selfcal`` (one ``<object>-unps/``
 folder per object): BEFORE made with ``light.refine=false`` (the self-calibrated lights as the
@@ -11,11 +12,15 @@ before onto those after (Kabsch), and the error of the lights with only that rot
 and with only the rest of the move. Rotating all lights and all normals together leaves the
 diffuse shading unchanged, so the fit's loss hardly tells such a turn; what the images do tell
 it is in the rest.
+
+With ``--selfcal`` the same split is made of the self-calibration's move: each light benchmark case
+(``benchmark.py``'s) is estimated by the network and the reversal test, then self-calibrated with
+the default settings, one json per case in ``<cache>/results/selfcal_moves/`` (a rerun resumes).
 """
 
 from __future__ import annotations
 
-import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -24,6 +29,9 @@ import numpy as np
 from unps.lights.contour import best_rotation, rotation_angle
 from unps.metrics import angular_error
 from unps.report.figures import read_light_file
+
+sys.path.insert(0, str(Path(__file__).parent))
+import benchmark  # noqa: E402
 
 
 def decompose(before: np.ndarray, after: np.ndarray, truth: np.ndarray) -> dict[str, float]:
@@ -42,22 +50,75 @@ def decompose(before: np.ndarray, after: np.ndarray, truth: np.ndarray) -> dict[
             "turn_only": error(turned), "rest_only": error(rest)}
 
 
-def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("before", type=Path, help="run folder: light.refine=false")
-    parser.add_argument("after", type=Path, help="run folder: the fit learns the lights")
-    args = parser.parse_args(argv)
-    names = sorted(p.name for p in args.after.glob("*-unps")
-                   if (args.before / p.name / "lights.txt").is_file() and (p / "lights.txt").is_file())
+HEADER = f"{'object':<14}{'before':>9}{'after':>9}{'moved':>8}{'turn':>8}{'turn only':>11}{'rest only':>11}"
+
+
+def line(name: str, row: dict[str, float]) -> str:
+    return (f"{name:<14}{row['before']:>8.2f}°{row['after']:>8.2f}°{row['moved']:>7.2f}°"
+            f"{row['turn']:>7.2f}°{row['turn_only']:>10.2f}°{row['rest_only']:>10.2f}°")
+
+
+def summary(rows: list[dict[str, float]]) -> str:
+    """Means over ``rows`` and how often the turn alone, and the rest alone, lowered or raised the
+    error by more than 0.1°."""
+    mean = {key: float(np.mean([r[key] for r in rows])) for key in rows[0]}
+    counts = [sum(r[key] < r["before"] - 0.1 for r in rows) for key in ("turn_only", "rest_only")]
+    raised = [sum(r[key] > r["before"] + 0.1 for r in rows) for key in ("turn_only", "rest_only")]
+    return (line(f"mean ({len(rows)})", mean) + f"\n{'':<14}the turn alone lowers the error on {counts[0]}, "
+            f"raises it on {raised[0]}; the rest alone lowers it on {counts[1]}, raises it on {raised[1]}")
+
+
+def fit_moves(before: Path, after: Path) -> None:
+    names = sorted(p.name for p in after.glob("*-unps")
+                   if (before / p.name / "lights.txt").is_file() and (p / "lights.txt").is_file())
     if not names:
-        sys.exit(f"no object with lights.txt in both {args.before} and {args.after}")
-    print(f"{'object':<14}{'before':>9}{'after':>9}{'moved':>8}{'turn':>8}{'turn only':>11}{'rest only':>11}")
+        sys.exit(f"no object with lights.txt in both {before} and {after}")
+    print(HEADER)
     for name in names:
-        row = decompose(read_light_file(args.before / name / "lights.txt"),
-                        read_light_file(args.after / name / "lights.txt"),
-                        read_light_file(args.after / name / "lights_gt.txt"))
-        print(f"{name.removesuffix('-unps'):<14}{row['before']:>8.2f}°{row['after']:>8.2f}°{row['moved']:>7.2f}°"
-              f"{row['turn']:>7.2f}°{row['turn_only']:>10.2f}°{row['rest_only']:>10.2f}°")
+        row = decompose(read_light_file(before / name / "lights.txt"),
+                        read_light_file(after / name / "lights.txt"),
+                        read_light_file(after / name / "lights_gt.txt"))
+        print(line(name.removesuffix("-unps"), row))
+
+
+def selfcal_moves(args) -> None:
+    """The self-calibration's move on each case, split as :func:`decompose` splits it."""
+    out = args.cache / "results" / "selfcal_moves"
+    out.mkdir(parents=True, exist_ok=True)
+    network, _ = benchmark.light_source(["reversal"], [])
+    stage = network.keywords["selfcal"]           # light=selfcal's settings, run here by hand
+    rows: dict[str, list[dict[str, float]]] = {}
+    print(f"{'':<10}{'set':>4} {HEADER}")
+    for group, name, label, read in benchmark.study_cases(args):
+        path = out / f"{group}-{name}-{label}.json"
+        if path.is_file():
+            row = json.loads(path.read_text())
+        else:
+            subject = read()
+            start = network(subject)
+            fitted, _ = stage(subject, start)
+            row = decompose(start.directions.astype(np.float64), fitted.directions.astype(np.float64),
+                            subject.light_directions.astype(np.float64))
+            path.write_text(json.dumps(row))
+        rows.setdefault(f"{group} {label}", []).append(row)
+        print(f"{group:<10}{label:>4} {line(name, row)}", flush=True)
+    for key, group_rows in rows.items():
+        print(f"\n{key}\n{summary(group_rows)}")
+
+
+def main(argv=None) -> None:
+    parser = benchmark.study_parser(__doc__.split("\n")[0], "unused", groups=["benchmark"])
+    parser.add_argument("before", type=Path, nargs="?", help="run folder: light.refine=false")
+    parser.add_argument("after", type=Path, nargs="?", help="run folder: the fit learns the lights")
+    parser.add_argument("--selfcal", action="store_true",
+                        help="split the self-calibration's move on the light benchmark's cases instead")
+    args = parser.parse_args(argv)
+    if args.selfcal:
+        selfcal_moves(args)
+    elif args.before is None or args.after is None:
+        parser.error("give BEFORE and AFTER run folders, or --selfcal")
+    else:
+        fit_moves(args.before, args.after)
 
 
 if __name__ == "__main__":
