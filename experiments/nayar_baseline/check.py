@@ -12,6 +12,7 @@ there, over-correct in the first.
 
 from __future__ import annotations
 
+import argparse
 from unps.metrics import normal_metrics
 from unps.solvers.nayar import nayar
 from unps.solvers.woodham import woodham
@@ -34,4 +35,6 @@ def main():
 
 
 if __name__ == "__main__":
+    argparse.ArgumentParser(description=__doc__,
+                            formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     main()
