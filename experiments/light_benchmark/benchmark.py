@@ -125,13 +125,14 @@ def synthetic(name: str):
 
 
 def instantiate_node(config: list[str], overrides: list[str], key: str):
-    """A node of a composed unps config, instantiated (partial nodes stay callables)."""
+    """A node of a composed unps config (``key`` dotted, e.g. ``light.selfcal``), instantiated
+    (partial nodes stay callables)."""
     from hydra import compose, initialize_config_module
     from hydra.utils import instantiate
     from omegaconf import OmegaConf
 
     with initialize_config_module("unps.conf", version_base=None):
-        node = compose(config[0], overrides=overrides)[key]
+        node = OmegaConf.select(compose(config[0], overrides=overrides), key)
     return instantiate(OmegaConf.to_container(node, resolve=True), _partial_=True)
 
 

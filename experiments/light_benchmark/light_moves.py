@@ -15,12 +15,12 @@ it is in the rest.
 
 With ``--selfcal`` the same split is made of the self-calibration's move: each light benchmark case
 (``benchmark.py``'s) is estimated by the network and the reversal test, then self-calibrated with
-the default settings, one json per case in ``<cache>/results/selfcal_moves/`` (a rerun resumes).
+the default settings, one json per case in ``<cache>/results/selfcal_moves/`` (a rerun resumes;
+``--report`` prints what has run).
 """
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -32,6 +32,8 @@ from unps.report.figures import read_light_file
 
 sys.path.insert(0, str(Path(__file__).parent))
 import benchmark  # noqa: E402
+import runs  # noqa: E402
+import scenes  # noqa: E402
 
 
 def decompose(before: np.ndarray, after: np.ndarray, truth: np.ndarray) -> dict[str, float]:
@@ -84,26 +86,25 @@ def fit_moves(before: Path, after: Path) -> None:
 def selfcal_moves(args) -> None:
     """The self-calibration's move on each case, split as :func:`decompose` splits it."""
     out = args.cache / "results" / "selfcal_moves"
-    out.mkdir(parents=True, exist_ok=True)
+    runs.claim(out, {"scenes": scenes.SCENE_VERSION})
     network, _ = benchmark.light_source(["reversal"], [])
-    stage = network.keywords["selfcal"]           # light=selfcal's settings, run here by hand
-    rows: dict[str, list[dict[str, float]]] = {}
-    print(f"{'':<10}{'set':>4} {HEADER}")
-    for group, name, label, read in benchmark.study_cases(args):
-        path = out / f"{group}-{name}-{label}.json"
-        if path.is_file():
-            row = json.loads(path.read_text())
-        else:
-            subject = read()
-            start = network(subject)
-            fitted, _ = stage(subject, start)
-            row = decompose(start.directions.astype(np.float64), fitted.directions.astype(np.float64),
-                            subject.light_directions.astype(np.float64))
-            path.write_text(json.dumps(row))
-        rows.setdefault(f"{group} {label}", []).append(row)
-        print(f"{group:<10}{label:>4} {line(name, row)}", flush=True)
-    for key, group_rows in rows.items():
-        print(f"\n{key}\n{summary(group_rows)}")
+    selfcal = benchmark.instantiate_node(["fit"], ["light=selfcal"], "light.selfcal")()
+
+    def run(subject) -> dict[str, float]:
+        start = network(subject)
+        fitted, _ = selfcal(subject, start)
+        return decompose(start.directions.astype(np.float64), fitted.directions.astype(np.float64),
+                         subject.light_directions.astype(np.float64))
+
+    def progress(case, row, _) -> str:
+        return f"{case[0]:<10}{case[2]:>4} {line(case[1], row)}"
+
+    rows = runs.summaries(benchmark.study_cases(args), out, run, lambda row: row,
+                                    progress, args.report)
+    print(f"\n{'':<10}{'set':>4} {HEADER}")
+    print("\n".join(progress(case, row, None) for case, row in rows.items()))
+    for group, label, group_rows in runs.by_light_set(rows):
+        print(f"\n{group} {label}\n{summary(group_rows)}")
 
 
 def main(argv=None) -> None:
