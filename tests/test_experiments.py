@@ -447,7 +447,7 @@ def test_error_by_angle_splits_the_mean_into_bands_that_add_up():
     assert rows[5][1:] == (0.2, 40.0, 8.0)
 
 
-def test_light_moves_splits_a_move_of_the_lights_into_a_common_turn_and_the_rest():
+def test_light_moves_splits_a_move_of_the_lights_into_a_common_turn_and_the_rest(capsys):
     study = load_script("lb_light_moves", "experiments/light_benchmark/light_moves.py")
     truth = render_lambertian("sphere", size=8, n_lights=12, seed=1).light_directions
     angle = np.radians(5)
@@ -468,3 +468,4 @@ def test_light_moves_splits_a_move_of_the_lights_into_a_common_turn_and_the_rest
             "raises it on 1") in text
     with pytest.raises(SystemExit):
         study.main([])                                   # neither two folders nor --selfcal
+    assert "give BEFORE and AFTER run folders, or --selfcal" in capsys.readouterr().err
