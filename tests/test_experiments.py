@@ -469,3 +469,19 @@ def test_light_moves_splits_a_move_of_the_lights_into_a_common_turn_and_the_rest
     with pytest.raises(SystemExit):
         study.main([])                                   # neither two folders nor --selfcal
     assert "give BEFORE and AFTER run folders, or --selfcal" in capsys.readouterr().err
+
+
+def test_selfcal_steps_reads_each_mark_off_the_trace_and_counts_raises(capsys):
+    study = load_script("lb_selfcal_steps", "experiments/light_benchmark/selfcal_steps.py")
+    steady = {"network": 10.0, "start": 8.0, "trace": [[0, 8.0], [100, 7.0], [200, 6.0], [250, 6.0]]}
+    drifting = {"network": 6.0, "start": 5.0, "trace": [[0, 5.0], [100, 5.5], [200, 7.5], [250, 6.5]]}
+    assert study.error_at(drifting, 200) == 7.5 and study.error_at(drifting, 250) == 6.5
+    lines = study.summary(["steady", "drifting"], [steady, drifting], [100, 200, 250]).splitlines()
+    assert lines[0].split()[:5] == ["step", "100:", "6.25°", "ratio", "0.781"]
+    assert "raised >1°:  0" in lines[0] and "vs the last step: 1 above, 1 below" in lines[0]
+    assert "raised >1°:  1  >2°:  1  worst +2.50° (drifting)" in lines[1]      # 7.5° from a start of 5°
+    assert "vs the last step: 1 above, 0 below" in lines[1]
+    assert "worst +1.50° (drifting)" in lines[2] and "0 above, 0 below" in lines[2]
+    with pytest.raises(SystemExit):
+        study.main(["--steps", "300", "--marks", "250", "400"])
+    assert "--marks [250, 400]: each must be a multiple of 100 up to --steps (300)" in capsys.readouterr().err

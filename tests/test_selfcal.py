@@ -213,6 +213,16 @@ def test_self_calibration_is_deterministic(glossy):
     np.testing.assert_array_equal(first.intensities, second.intensities)
 
 
+def test_an_observer_sees_the_lights_every_hundred_steps_and_the_ones_returned_last(glossy):
+    start, seen = rotated(glossy, 10), []
+    found, _ = self_calibrate(glossy, start, SelfCalibration(steps=250, max_pixels=600),
+                              observe=lambda step, directions: seen.append((step, directions)))
+    assert [step for step, _ in seen] == [0, 100, 200, 250]
+    np.testing.assert_allclose(seen[0][1], start.directions, atol=1e-6)
+    np.testing.assert_allclose(seen[-1][1], found.directions, atol=1e-6)
+    assert angular_error(seen[1][1], start.directions).mean() > 0.1          # it watched the lights move
+
+
 def test_self_calibration_keeps_its_first_guess_when_the_fit_diverges(glossy, caplog, monkeypatch):
     import unps.lights.selfcal as selfcal
 

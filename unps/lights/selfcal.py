@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -96,7 +97,7 @@ class SelfCalibration:
         device: where the fit runs (the run's ``device=``, :func:`unps.device.resolve_device`).
     """
 
-    steps: int = 1500
+    steps: int = 1000
     max_pixels: int = 4000
     levels: int = 4
     sharpness: tuple[float, ...] = (10.0, 30.0, 100.0, 300.0)
@@ -122,13 +123,15 @@ class SelfCalibration:
         return self_calibrate(subject, lights, self)
 
 
-def self_calibrate(subject: Subject, lights: Lights,
-                   settings: SelfCalibration = SelfCalibration()) -> tuple[Lights, Verdict]:
+def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration = SelfCalibration(),
+                   observe: Callable[[int, np.ndarray], None] | None = None) -> tuple[Lights, Verdict]:
     """The lights that best explain the subject's captured images, starting from ``lights``.
 
     Args:
         subject: its captured images (``observed_images()``) and mask are used.
         lights: the first guess, (n, 3) unit directions and (n, 3) intensities (or None: 1).
+        observe: called as the fit goes (:func:`fit`) with the step and the (n, 3) directions the
+            fit would return if it stopped there.
 
     Raises:
         InputError: fewer than 4 images, or no light reaching the object in any image.
@@ -164,7 +167,7 @@ def self_calibrate(subject: Subject, lights: Lights,
     weight = lit_share(subject, settings.max_pixels) if settings.skip_black else None
     loss, pull = fit(model, target.to(device), settings, None if prior is None else prior.to(device),
                      None if weight is None else weight.to(device),
-                     None if ceiling is None else ceiling.to(device))
+                     None if ceiling is None else ceiling.to(device), observe)
     directions, scales = (t.detach().cpu().numpy().astype(np.float64) for t in model.lights())
     if not (np.isfinite(loss) and np.all(np.isfinite(directions))):
         log.warning("self-calibration of %s diverged; keeping the first guess", subject.name)
@@ -276,13 +279,15 @@ def objective(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfC
 
 def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibration,
         prior: NetworkPrior | None = None, weight: torch.Tensor | None = None,
-        ceiling: torch.Tensor | None = None) -> tuple[float, float]:
+        ceiling: torch.Tensor | None = None,
+        observe: Callable[[int, np.ndarray], None] | None = None) -> tuple[float, float]:
     """Adam on every unknown of the model (the shared frame held where ``settings.hold_frame``)
     for ``settings.steps`` steps, the cast shadows marched again every ``settings.shadows_every``
     steps, the pixels weighted by ``weight`` (m,) and the black values held only to ``ceiling``
     (n, 3) where given (:func:`objective`); stops early on a non-finite loss, read every
     :data:`CHECK_EVERY` steps (a loss that is not finite leaves the parameters so, and the final
-    loss with them).
+    loss with them). ``observe(step, directions)``, where given, sees the lights' (n, 3) unit
+    directions before every :data:`CHECK_EVERY`-th step and after the last.
 
     Returns:
         The objective and the prior's pull at the end, with the shadows of the final depth and
@@ -309,11 +314,20 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
         loss, _ = total(visible)
         if step % CHECK_EVERY == 0 and not torch.isfinite(loss):
             return loss.item(), float("nan")
+        if observe is not None and step % CHECK_EVERY == 0:
+            observe(step, directions_of(model))
         if step % settings.log_every == 0:
             log.info("self-calibration step %d/%d: loss %.4g", step, settings.steps, loss.item())
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
+    if observe is not None:
+        observe(settings.steps, directions_of(model))
     with torch.no_grad():
         loss, pull = total(model.visibility() if every else None)
         return loss.item(), pull.item()
+
+
+def directions_of(model: SelfCalibrationModel) -> np.ndarray:
+    """(n, 3) float64 unit directions of the model's lights, on the CPU."""
+    return model.lights()[0].detach().cpu().numpy().astype(np.float64)
