@@ -86,6 +86,8 @@ def main(argv=None) -> None:
                      "or --steps")
     out = args.out or args.cache / "results" / f"selfcal_steps-{args.steps}"
     runs.claim(out, {"steps": args.steps, "scenes": scenes.SCENE_VERSION})
+    print(f"network → reversal test → self-calibration, default settings but {args.steps} steps; the "
+          f"lights' mean direction error at steps {', '.join(map(str, args.marks))}; results in {out}")
     network, _ = benchmark.light_source(["reversal"], [])
     settings = benchmark.instantiate_node(
         ["fit"], ["light=selfcal", f"light.selfcal.steps={args.steps}"], "light.selfcal")()
