@@ -191,6 +191,8 @@ def test_bad_dataset_settings():
         LightDataset(4, resolution=32, images=65)
     with pytest.raises(InputError, match="paint is a share of the samples, in 0…1; got 1.5"):
         LightDataset(4, resolution=32, paint=1.5)
+    with pytest.raises(InputError, match="second_material is a share of the samples, in 0…1; got -0.5"):
+        LightDataset(4, resolution=32, second_material=-0.5)
 
 
 # training, checkpoints, estimation --------------------------------------------------------

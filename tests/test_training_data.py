@@ -16,7 +16,8 @@ from unps.errors import InputError
 from unps.io.images import read_image, write_png16
 from unps.lightnet import lathe
 from unps.lightnet.brdf import NeuralBRDF
-from unps.lightnet.materials import MaterialBank
+from unps.lightnet.brdf import AnalyticBRDF
+from unps.lightnet.materials import MaterialBank, coated, darkened
 from unps.lightnet.rig import FORMATS, LAYOUTS, Camera, draw_lights, expose, quantize, record, stack_noise
 from unps.lightnet.shapes import GROOVE_LENGTH, GROOVE_WIDTH, SHAPES, groove_depth, sample_generator
 from unps.lightnet.data import Draws, LightData, loader_workers
@@ -250,6 +251,39 @@ def test_paint_lays_a_few_flat_colours_over_the_same_scene():
         assert 2 <= len(torch.unique(ratio)) <= 12                   # … under a few flat colours
 
 
+def test_a_second_material_lies_in_patches_over_the_same_scene():
+    """Where the second material's coat is not, the sample is the one-material sample (up to the
+    stack's level); under it, another material: half of them dark."""
+    common = dict(resolution=64, images=4, camera=None, perturbation=0.0, saturation=None, texture=0.0,
+                  materials=MaterialBank(measured=1.0))
+    plain, two = LightDataset(8, **common), LightDataset(8, second_material=1.0, **common)
+    shares, darkening = [], []
+    for index in range(8):
+        scene, a, b = two.draw(index), plain[index], two[index]
+        torch.testing.assert_close(a["directions"], b["directions"])
+        lit = (a["images"] > 1e-3) & (b["images"] > 1e-3)
+        coat = scene.coat.bool().expand_as(lit)
+        level = (b["images"][lit & ~coat] / a["images"][lit & ~coat])
+        torch.testing.assert_close(level, torch.full_like(level, float(level.median())))
+        under = b["images"][lit & coat] / a["images"][lit & coat]
+        assert float(under.std() / under.mean()) > 0.05                 # another material there
+        shares.append(float(scene.coat[scene.maps.mask].mean()))
+        darkening.append(float(scene.second.diffuse.max() / scene.brdf.diffuse.max()))
+    assert all(0 < share < 1 for share in shares) and 0.1 < np.mean(shares) < 0.9
+    assert min(darkening) < 0.1
+    assert all(plain.draw(index).second is None for index in range(8))
+
+
+def test_a_darkened_material_keeps_its_lobes():
+    brdf = AnalyticBRDF([0.5, 0.4, 0.3], [[0.2, 0.2, 0.2], [0.1, 0.1, 0.1]], (0.1, 0.4), (0.04, 0.05))
+    dark = darkened(brdf, 0.01)
+    torch.testing.assert_close(dark.diffuse, brdf.diffuse * 0.01)
+    assert torch.equal(dark.specular, brdf.specular) and dark.roughness == brdf.roughness
+    assert dark.fresnel0 == brdf.fresnel0
+    neural = tiny_neural_brdf(0)
+    assert darkened(neural, 0.01) is neural
+
+
 def test_jars_render_the_same_on_one_thread_and_on_two():
     """Points tied for the nearest in a pixel: the last is kept, not whichever thread wrote last."""
     before = torch.get_num_threads()
@@ -265,7 +299,7 @@ def test_jars_render_the_same_on_one_thread_and_on_two():
 
 
 SCENE = dict(resolution=64, images=6, shapes=dict.fromkeys(SHAPES, 1.0), layouts=dict.fromkeys(LAYOUTS, 1.0),
-             camera=Camera(), paint=0.5, seed=11)
+             camera=Camera(), paint=0.5, second_material=0.5, seed=11)
 
 
 def test_samples_drawn_in_a_worker_and_rendered_as_a_batch_are_the_samples():
@@ -339,11 +373,15 @@ def tiny_neural_brdf(seed: int) -> NeuralBRDF:
 
 @pytest.mark.parametrize("camera", [Camera(), None], ids=["camera", "perturbation"])
 def test_a_batch_renders_each_scene_as_it_renders_alone(camera):
-    """Analytic materials of one and two lobes, a neural one, painted and plain albedo, the camera's
-    noise drawn or left to the renderer (a seed): the batch is each scene's render, stacked."""
+    """Analytic materials of one and two lobes, a neural one, painted and plain albedo, one material
+    and two (a neural second among them), the camera's noise drawn or left to the renderer (a seed):
+    the batch is each scene's render, stacked."""
     dataset = LightDataset(6, **{**SCENE, "camera": camera, "seed": 4}, materials=MaterialBank(measured=1.0))
     scenes = [dataset.draw(i) for i in range(6)]
     scenes[1] = dataclasses.replace(scenes[1], brdf=tiny_neural_brdf(1), family="neural")
+    scenes[5] = dataclasses.replace(scenes[5], second=tiny_neural_brdf(2),
+                                    coat=coated(64, sample_generator(9, 0)) * scenes[5].maps.mask)
+    assert {scene.second is None for scene in scenes} == {True, False}
     if camera is not None:
         scenes[2:4] = [dataclasses.replace(s, exposure=dataclasses.replace(s.exposure, noise=7 + i))
                        for i, s in enumerate(scenes[2:4])]

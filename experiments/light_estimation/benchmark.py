@@ -16,8 +16,9 @@
 2. Held-out synthetic stacks (seeds never used in training) of the checkpoint's own recipe, per
    BRDF family: analytic and measured-span lobes always, MERL neural fits when
    ``<data>/merl_nbrdf`` exists, MERL tables with ``--merl-dir``; and per shape family (blob,
-   vessel, relief, sculpture), seen through the simulated camera under every light layout; each
-   row also after the cast-shadow reversal test.
+   vessel, relief, sculpture), seen through the simulated camera under every light layout; then
+   every shape family of one material against the same of two laid on in patches; each row also
+   after the cast-shadow reversal test.
 3. Framings (``light.framings``): held-out stacks per shape family rendered at twice the network's
    resolution and framed as ``light=estimated`` frames a capture (cropped to the object, then
    area-resized), the direction MAE of one pass, of the eight symmetries, of the default's eight
@@ -138,8 +139,9 @@ def renders(names: list[str], checkpoint):
 
 @torch.no_grad()
 def synthetic(net, config, families: dict, samples: int):
-    """Held-out stacks per BRDF family (blobs, the cap of lights, no camera) and per shape family
-    (analytic materials, every light layout, the simulated camera)."""
+    """Held-out stacks per BRDF family (blobs, the cap of lights, no camera), per shape family
+    (analytic materials, every light layout, the simulated camera), and every shape of one
+    material against the same of two (analytic and measured-span, laid on in patches)."""
     recipe = config["recipe"]
     common = dict(resolution=recipe["resolution"], images=recipe["images"], seed=987_654)
     print(f"held-out synthetic ({recipe['resolution']} px, {recipe['images']} images, {samples} "
@@ -149,6 +151,11 @@ def synthetic(net, config, families: dict, samples: int):
     for shape in SHAPES:
         score(net, LightDataset(samples, shape=shape, layouts=dict.fromkeys(LAYOUTS, 1.0),
                                 camera=Camera(), **common), f"shape {shape} (rig layouts, camera)")
+    mixed = dict(shapes=dict.fromkeys(SHAPES, 1.0), layouts=dict.fromkeys(LAYOUTS, 1.0), camera=Camera(),
+                 materials=MaterialBank(analytic=1, measured=1), **common)
+    for share, label in ((0.0, "one material"), (1.0, "two materials in patches")):
+        score(net, LightDataset(samples, second_material=share, **mixed),
+              f"every shape, {label} (rig layouts, camera)")
 
 
 def score(net, ds: LightDataset, label: str) -> None:

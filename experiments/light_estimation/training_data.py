@@ -5,7 +5,8 @@
 Rows: the shape families of ``unps.lightnet.shapes.SHAPES``. Columns: the normal maps of three
 samples (RGB = (n + 1) / 2), then the first image of three stacks drawn as the default training
 data draws them (every light layout, analytic materials, the simulated camera), each scaled to
-its own maximum.
+its own maximum. Last row: three samples of two materials (``data.second_material``), where the
+second lies (white) and the first image.
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ SAMPLES = 3
 
 
 def main() -> None:
-    fig, axes = plt.subplots(len(SHAPES), 2 * SAMPLES, figsize=(2 * SAMPLES * 1.6, len(SHAPES) * 1.7))
+    rows = len(SHAPES) + 1
+    fig, axes = plt.subplots(rows, 2 * SAMPLES, figsize=(2 * SAMPLES * 1.6, rows * 1.7))
     for row, name in enumerate(SHAPES):
         stacks = LightDataset(SAMPLES, resolution=128, images=4, shape=name, seed=1,
                               layouts=dict.fromkeys(LAYOUTS, 1.0), camera=Camera())
@@ -37,6 +39,14 @@ def main() -> None:
             image = stacks[k]["images"][0].permute(1, 2, 0).numpy()
             axes[row, SAMPLES + k].imshow(np.clip(image / max(float(image.max()), 1e-6), 0, 1))
         axes[row, 0].set_ylabel(name)
+    two = LightDataset(SAMPLES, resolution=128, images=4, seed=2, shapes=dict.fromkeys(SHAPES, 1.0),
+                       layouts=dict.fromkeys(LAYOUTS, 1.0), camera=Camera(), second_material=1.0)
+    for k in range(SAMPLES):
+        scene = two.draw(k)
+        axes[-1, k].imshow((0.3 * scene.maps.mask + 0.7 * scene.coat).numpy(), cmap="gray", vmin=0, vmax=1)
+        image = two[k]["images"][0].permute(1, 2, 0).numpy()
+        axes[-1, SAMPLES + k].imshow(np.clip(image / max(float(image.max()), 1e-6), 0, 1))
+    axes[-1, 0].set_ylabel("two materials")
     axes[0, 1].set_title("normals")
     axes[0, SAMPLES + 1].set_title("through the simulated camera")
     for ax in axes.flat:

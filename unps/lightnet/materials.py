@@ -154,6 +154,29 @@ def painted(resolution: int, generator: torch.Generator) -> torch.Tensor:
     return albedo
 
 
+def coated(resolution: int, generator: torch.Generator) -> torch.Tensor:
+    """Where a second material lies: (H, W) float, 1 on patches with sharp edges, 0 elsewhere.
+
+    A smooth random field (a 3×3 to 10×10 grid of values, upsampled) above a level drawn so that
+    the patches cover from about a fifth to four fifths of the image: a glaze over part of a
+    pot, a metal inlay, a matte label on a glossy body.
+    """
+    u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
+    cells = int(torch.randint(3, 11, (1,), generator=generator))
+    field = F.interpolate(u(1, 1, cells, cells), size=(resolution, resolution), mode="bicubic",
+                          align_corners=True)[0, 0]
+    return (field > 0.3 + 0.4 * float(u(1))).float()
+
+
+def darkened(brdf, factor: float):
+    """``brdf`` with its diffuse albedo times ``factor`` and its lobes as they are: a dark glossy
+    material (black phenolic, dark oxidised steel) when ``factor`` is small. A material that is not
+    an :class:`~unps.lightnet.brdf.AnalyticBRDF` (a MERL table or fit) is returned as it is."""
+    if not isinstance(brdf, AnalyticBRDF):
+        return brdf
+    return AnalyticBRDF(brdf.diffuse * factor, brdf.specular, brdf.roughness, brdf.fresnel0)
+
+
 HELD_OUT_MERL = frozenset({
     "alumina-oxide", "aventurnine", "black-fabric", "black-oxidized-steel", "black-soft-plastic",
     "blue-fabric", "blue-metallic-paint2", "brass", "chrome-steel", "colonial-maple-223",

@@ -2,7 +2,8 @@
 
 A sample is a function of (seed, index): a shape (one of the families of
 :data:`unps.lightnet.shapes.SHAPES`, or a view of a mesh from a folder), a material (analytic,
-MERL table or MERL neural fit, mixed by weight), 64 lights in one of the rig layouts of
+MERL table or MERL neural fit, mixed by weight; on a share of the samples a second one in patches),
+64 lights in one of the rig layouts of
 :mod:`unps.lightnet.rig` of which ``images`` are drawn, attached and cast shadows, per-image
 intensities U(0.2, 2) shared by RGB, and then either the paper's perturbation U(−0.025, 0.025) or
 a simulated camera (exposure, noise, saturation, 8/16-bit storage).
@@ -23,9 +24,16 @@ from unps.device import to_device
 from unps.errors import InputError
 from unps.geometry import ShadowPlan, march_shadows
 from unps.lightnet.brdf import AnalyticBRDF
-from unps.lightnet.materials import FAMILIES, LobeTable, MaterialBank, painted, shade, shade_batch
+from unps.lightnet.materials import (FAMILIES, LobeTable, MaterialBank, coated, darkened, painted, shade,
+                                     shade_batch)
 from unps.lightnet.rig import LAYOUTS, Camera, Exposure, Exposures, draw_lights, expose, record, record_batch
-from unps.lightnet.shapes import SHAPES, ShapeMaps, check_weights, draw_shape, plan_shadows, sample_generator
+from unps.lightnet.shapes import (SHAPES, ShapeMaps, cast_shadows, check_weights, draw_shape, plan_shadows,
+                                  sample_generator)
+
+DARKEST_SECOND = -2.0
+"""A second material's diffuse albedo is its drawn one times 10^(DARKEST_SECOND · U(0, 1)): from as
+drawn down to a hundredth, so half of them are dark glossy ones, black in an 8-bit image but where
+their highlights fall, as the dark materials of real objects are."""
 
 LEVEL_SAMPLES = 8192
 """About this many of a stack's object values (evenly spaced) set its 99th percentile."""
@@ -44,6 +52,10 @@ class LightDataset(Dataset):
             ``mesh_fraction`` of samples.
         texture: largest relative albedo variation over the surface (smooth).
         paint: share of samples with painted patches of other colours (:func:`painted`).
+        second_material: share of samples with a second material, drawn from ``materials`` as the
+            first, its diffuse albedo darkened by up to a hundredth (:data:`DARKEST_SECOND`), laid
+            on in patches (:func:`~unps.lightnet.materials.coated`): objects of two materials, a
+            dark glossy one beside a bright one, as many captures are.
         perturbation: half-width of the uniform noise added to images scaled to a 99th
             percentile of 1.
         saturation: the level, in units of that 99th percentile, where the simulated camera
@@ -73,13 +85,15 @@ class LightDataset(Dataset):
                  shapes: dict[str, float] | None = None, layouts: dict[str, float] | None = None,
                  camera: Camera | None = None, seed: int = 0, family: str | None = None,
                  shape: str | None = None, offset: int = 0, paint: float = 0.0,
-                 device: torch.device = torch.device("cpu")):
+                 second_material: float = 0.0, device: torch.device = torch.device("cpu")):
         if resolution % 32 or resolution < 32:
             raise InputError(f"resolution must be a multiple of 32, got {resolution}")
         if not 1 <= images <= lights_per_shape:
             raise InputError(f"images per sample must lie in 1…{lights_per_shape}, got {images}")
         if not 0 <= paint <= 1:
             raise InputError(f"paint is a share of the samples, in 0…1; got {paint}")
+        if not 0 <= second_material <= 1:
+            raise InputError(f"second_material is a share of the samples, in 0…1; got {second_material}")
         self.shapes = dict(shapes) if shapes else {"blob": 1.0}
         self.layouts = dict(layouts) if layouts else {"cap": 1.0}
         check_weights(self.shapes, SHAPES, "shape families")
@@ -92,6 +106,7 @@ class LightDataset(Dataset):
         self.materials = materials or MaterialBank()
         self.meshes, self.mesh_fraction = meshes or [], mesh_fraction if meshes else 0.0
         self.texture, self.paint, self.perturbation = texture, paint, perturbation
+        self.second_material = second_material
         self.intensity_range, self.seed, self.family = intensity_range, seed, family
         self.offset, self.saturation, self.device = offset, saturation, torch.device(device)
 
@@ -127,11 +142,16 @@ class LightDataset(Dataset):
         if self.paint > 0 and float(u(1)) < self.paint:
             paint = painted(self.resolution, g)
             albedo = paint if albedo is None else albedo[..., None] * paint
+        second = coat = None
+        if self.second_material > 0 and float(u(1)) < self.second_material:
+            second = darkened(self.materials.draw(g)[1], 10 ** (DARKEST_SECOND * float(u(1))))
+            coat = coated(self.resolution, g) * maps.mask
         shape = (self.images, 3, self.resolution, self.resolution)
         if self.camera is not None:
-            return Scene(maps, brdf, family, lights[pick], intensities, albedo,
+            return Scene(maps, brdf, family, lights[pick], intensities, albedo, second, coat,
                          exposure=expose(self.camera, shape, g, defer_noise=self.device.type != "cpu"))
-        return Scene(maps, brdf, family, lights[pick], intensities, albedo, saturation=self.saturation,
+        return Scene(maps, brdf, family, lights[pick], intensities, albedo, second, coat,
+                     saturation=self.saturation,
                      perturbation=self.perturbation * (2 * torch.rand(shape, generator=g) - 1))
 
 
@@ -142,6 +162,7 @@ class Scene:
     Attributes:
         maps: the shape; brdf: its material (of ``family``); lights: (n, 3) unit directions;
         intensities: (n,); albedo: (H, W) or (H, W, 3) multiplier, or None.
+        second: a second material, or None; coat: (H, W) float, 1 where it lies (None with it).
         exposure: the simulated camera's draws, or None for the paper's perturbation:
         saturation: the level the stack is clipped at (None: none), and
         perturbation: (n, 3, H, W) the noise added after.
@@ -153,6 +174,8 @@ class Scene:
     lights: torch.Tensor
     intensities: torch.Tensor
     albedo: torch.Tensor | None
+    second: torch.nn.Module | None = None
+    coat: torch.Tensor | None = None
     exposure: Exposure | None = None
     saturation: float | None = None
     perturbation: torch.Tensor | None = None
@@ -169,7 +192,12 @@ def render(scene: Scene, device: torch.device) -> dict[str, torch.Tensor]:
     maps = scene.maps.to(device)
     lights, intensities = scene.lights.to(device), scene.intensities.to(device)
     albedo = None if scene.albedo is None else scene.albedo.to(device)
-    images = shade(maps, scene.brdf.to(device), lights, intensities, albedo)
+    if scene.second is None:
+        images = shade(maps, scene.brdf.to(device), lights, intensities, albedo)
+    else:
+        first, second = (shade(maps, brdf.to(device), lights, intensities, albedo, shadows=False)
+                         for brdf in (scene.brdf, scene.second))
+        images = torch.lerp(first, second, scene.coat.to(device)) * ~cast_shadows(maps, lights)[:, None]
     values = images[:, :, maps.mask].flatten()
     level = torch.quantile(values[:: max(1, len(values) // LEVEL_SAMPLES)], 0.99).clamp_min(1e-8)
     images = images / level
@@ -199,6 +227,9 @@ class SceneBatch:
             (:func:`level_picks`).
         lobes: the analytic materials; others: the other materials, by sample; family: (B,) each
             sample's material family, its index in :data:`~unps.lightnet.materials.FAMILIES`.
+        second_lobes, second_others, coat: the second materials as ``lobes`` and ``others`` (a
+            sample without one: a row of no light), and (B, H, W) where each lies; None when no
+            sample of the batch has one.
         exposures: the camera's draws, packed (or None); saturation, perturbation: (B, n, 3, H, W)
             the paper's noise otherwise.
     """
@@ -213,6 +244,9 @@ class SceneBatch:
     lobes: LobeTable
     others: dict[int, torch.nn.Module]
     family: torch.Tensor
+    second_lobes: LobeTable | None
+    second_others: dict[int, torch.nn.Module]
+    coat: torch.Tensor | None
     exposures: Exposures | None
     saturation: float | None
     perturbation: torch.Tensor | None
@@ -231,6 +265,8 @@ class SceneBatch:
         size = scenes[0].maps.depth.shape
         mask = torch.stack([scene.maps.mask for scene in scenes])
         lights = torch.stack([scene.lights for scene in scenes])
+        seconds = [scene.second for scene in scenes]
+        two = any(second is not None for second in seconds)
         return cls(torch.stack([scene.maps.normals for scene in scenes]), lights,
                    torch.stack([scene.intensities for scene in scenes]),
                    torch.stack([albedo_rgb(scene.albedo, size) for scene in scenes]),
@@ -239,6 +275,11 @@ class SceneBatch:
                    LobeTable.of(brdfs),
                    {i: brdf for i, brdf in enumerate(brdfs) if not isinstance(brdf, AnalyticBRDF)},
                    torch.tensor([FAMILIES.index(scene.family) for scene in scenes]),
+                   LobeTable.of(seconds) if two else None,
+                   {i: brdf for i, brdf in enumerate(seconds)
+                    if brdf is not None and not isinstance(brdf, AnalyticBRDF)},
+                   torch.stack([torch.zeros(size) if scene.coat is None else scene.coat for scene in scenes])
+                   if two else None,
                    Exposures.of([scene.exposure for scene in scenes]) if camera else None,
                    scenes[0].saturation,
                    None if camera else torch.stack([scene.perturbation for scene in scenes]))
@@ -254,8 +295,15 @@ def render_batch(batch: SceneBatch, device: torch.device) -> dict[str, torch.Ten
     """
     to = lambda x: to_device(x, device)     # noqa: E731
     mask = to(batch.shadows.mask)
-    images = shade_batch(to(batch.normals), mask, batch.lobes.to(device), batch.others, to(batch.lights),
-                         to(batch.intensities), to(batch.albedo), march_shadows(batch.shadows, device))
+    normals, lights, intensities, albedo = (to(x) for x in (batch.normals, batch.lights, batch.intensities,
+                                                            batch.albedo))
+    shadows = march_shadows(batch.shadows, device)
+    images = shade_batch(normals, mask, batch.lobes.to(device), batch.others, lights, intensities, albedo,
+                         shadows)
+    if batch.coat is not None:
+        second = shade_batch(normals, mask, batch.second_lobes.to(device), batch.second_others, lights,
+                             intensities, albedo, shadows)
+        images = torch.lerp(images, second, to(batch.coat)[:, None, None])
     images = images / stack_levels(images, to(batch.level_index), to(batch.level_valid))
     if batch.exposures is not None:
         images = record_batch(images, batch.exposures)
