@@ -71,7 +71,9 @@ def test_cli_runs_from_any_folder_and_reports_bad_input(tmp_path):
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "run" / "metrics.json").is_file()
     lines = [line.split("] - ", 1)[-1] for line in done.stderr.splitlines() if line.strip()]
-    assert len(lines) == len(set(lines)), "a log line printed twice"
+    assert not any(a == b for a, b in zip(lines, lines[1:])), "a log line printed twice"   # two handlers
+    # (the same text may come twice from two events: the robust initialisation of the reversal test
+    # and of the fit, under lights that differ by less than its summary shows)
     assert not any(noise in done.stdout + done.stderr for noise in ("GPU available", "Tip:", "Training:",
                                                                      "deprecated"))
     assert "step 30/30: loss" in done.stderr and "outputs written to" in done.stderr
