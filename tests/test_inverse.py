@@ -99,7 +99,8 @@ def test_batch_norm_reads_out_with_the_statistics_it_was_fitted_with():
     ("init", "woodham", "preset.init must be one of robust, least_squares, got 'woodham'"),
     ("residual", "l2", "preset.residual must be one of absolute, sqrt, relative, albedo, got 'l2'"),
     ("dark_hold", -0.1, "preset.dark_hold must be a number >= 0, got -0.1"),
-    ("hold_light_frame", "yes", "preset.hold_light_frame must be true or false, got 'yes'")])
+    ("hold_light_frame", "yes", "preset.hold_light_frame must be true or false, got 'yes'"),
+    ("precision", "16-mixed", "preset.precision must be one of auto, 32-true, bf16-mixed, got '16-mixed'")])
 def test_a_preset_names_a_bad_network_setting(field, value, message):
     with pytest.raises(InputError, match=re.escape(message)):
         Preset.from_config(**{field: value})
@@ -392,6 +393,40 @@ def test_twenty_steps_on_a_tiny_sphere_lower_the_loss_and_the_error():
     loss1, mae1 = state()
     assert loss1 < 0.8 * loss0         # measured: 10172 → 6983
     assert mae1 < 0.5 * mae0           # measured: 72° → 22°
+
+
+def test_the_networks_precision_is_bfloat16_on_a_gpu_only_unless_chosen():
+    auto, chosen = Preset.from_config(), Preset.from_config(precision="bf16-mixed")
+    assert auto.precision == "auto"
+    assert auto.network_precision(torch.device("cpu")) == "32-true"
+    assert auto.network_precision(torch.device("cuda", 1)) == "bf16-mixed"
+    assert chosen.network_precision(torch.device("cpu")) == "bf16-mixed"
+    assert Preset.from_config(precision="32-true").network_precision(torch.device("cuda")) == "32-true"
+
+
+def test_networks_in_bf16_render_float32_maps_close_to_the_float32_ones(sphere, caplog):
+    """``preset.precision=bf16-mixed`` reaches the system; its networks then compute in bfloat16
+    (the maps differ from float32's) and hand float32 maps to the physics: unit normals within a
+    degree of float32's on average, reflectance within a percent (measured: 0.43°, 0.11 %)."""
+    torch.manual_seed(0)
+    system, _ = build_system(sphere, sphere.light_directions, Preset.from_config(**TINY, precision="bf16-mixed"),
+                             InterreflectionModel(enabled=False), False, "")
+    assert system.networks_in_bf16
+    assert "preset.precision=bf16-mixed on cpu" in caplog.text
+    index = torch.arange(sphere.n_images)
+    with torch.no_grad():
+        half = system.render(index, noise=False)
+        system.networks_in_bf16 = False
+        full = system.render(index, noise=False)
+    for key in ("normals", "reflectance", "reconstruction"):
+        assert half[key].dtype == torch.float32
+        assert not torch.equal(half[key], full[key])
+    assert torch.allclose(half["normals"].norm(dim=1), torch.ones(1), atol=1e-5)
+    degrees = angular_error(half["normals"][0].permute(1, 2, 0).numpy()[sphere.mask],
+                            full["normals"][0].permute(1, 2, 0).numpy()[sphere.mask])
+    assert degrees.mean() < 1.0
+    relative = (half["reflectance"] - full["reflectance"]).abs().sum() / full["reflectance"].abs().sum()
+    assert relative < 0.01
 
 
 def test_lights_learnt_in_the_fit_keep_their_frame_unless_it_is_freed():

@@ -430,6 +430,8 @@ def test_a_sample_rendered_on_a_gpu_is_the_cpu_sample_to_float_rounding():
     assert_same_stacks(batch["images"].cpu(), alone.cpu())
     pinned = SceneBatch.of(scenes).pin_memory()
     assert pinned.normals.is_pinned() and pinned.shadows.depth.is_pinned() and pinned.lobes.diffuse.is_pinned()
-    assert pinned.exposures.gain.is_pinned() and pinned.exposures.picks[1].is_pinned()
+    assert pinned.exposures.gain.is_pinned()
+    assert all(pick.is_pinned() for pick in pinned.exposures.picks if pick.numel())   # an empty one has
+    # no memory to pin (a storage format no sample of the batch drew)
     again = render_batch(pinned, torch.device("cuda"))
     assert all(torch.equal(again[key], batch[key]) for key in batch)

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# One call on a lent GPU machine (a bare CUDA image without ../shared), about 7 minutes: the CUDA
-# tests, the training and data rows, the default command, where training and a fit wait for the
-# GPU, the paper preset's step in variants, and the paper preset's fit of cat; every line also
-# lands in $OUT/log, with each part's seconds.
+# One call on a lent GPU machine (a bare CUDA image without ../shared), at most 9 minutes: the CUDA
+# tests, the paper preset's fit of cat in float32 and with its networks in bfloat16, the training
+# and data rows, where rendering the training data spends the GPU's time, a fresh process's
+# start-up and the default command; every line also lands in $OUT/log, with each part's seconds.
 #   here:   bash ../shared/tools/gpu-prep.sh          (packs .gpu/: wheels and two DiLiGenT crops)
 #   there:  bash experiments/gpu/lent_machine.sh       (with .gpu/ carried along; writes under $OUT)
 set -u
@@ -20,12 +20,12 @@ part() {   # part <seconds> <label> <command…>: run it within the limit, say h
   timeout "$limit" "$@"
   echo "[$label: $((SECONDS - start)) s, exit $?]"
 }
-part 100 tests python3 -m pytest -q -p no:cacheprovider tests/test_device.py tests/test_training_data.py \
-  tests/test_geometry.py 2>&1 | tail -3
-part 150 "train, data" $gpu --rows train data 2>&1 | grep "^|\|^\["
-part 100 default $gpu --rows default --subjects cat 2>&1 | grep "^|\|^\["
-part 100 syncs $gpu --rows syncs --train-steps 20 2>&1 | grep "^|\|^\["
-part 80 fitstep $gpu --rows fitstep --subjects cat 2>&1 | grep -v "^  running\|^machine\|self.log"
-part 120 paper $gpu --rows paper --subjects cat 2>&1 | grep "^|\|^\["
+part 80 tests python3 -m pytest -q -p no:cacheprovider tests/test_device.py tests/test_training_data.py \
+  tests/test_inverse.py -k "test_device or gpu or batch or bf16 or second" 2>&1 | tail -3
+part 220 paper $gpu --rows paper --subjects cat --fit-precisions 32-true bf16-mixed 2>&1 | grep "^|\|^\["
+part 110 "train, data" $gpu --rows train data --precisions 32-true 2>&1 | grep "^|\|^\["
+part 40 render $gpu --rows render 2>&1 | grep -v "^  running\|^machine\|USDT"
+part 30 start $gpu --rows start 2>&1 | grep "^|\|^\["
+part 90 default $gpu --rows default --subjects cat 2>&1 | grep "^|\|^\["
 # what comes back: the log, each run's metrics.json and fit.log, not its checkpoints and arrays
 find "$out" \( -name "*.ckpt" -o -name "*.npy" -o -name "*.ply" -o -name "events.out.*" \) -delete

@@ -19,7 +19,13 @@ Rows, each a fresh process (``python -m unps.fit`` / ``python -m unps.train``) i
   and a batch at once, the loader with its workers, the network's training step;
 - ``loop`` (not run by default): the training loop by hand, per step: waiting on the loader,
   rendering, the network's step; on a GPU with the loader's batches pinned and not;
-- ``profile`` (not run by default): a short training run under cProfile, in this process.
+- ``profile`` (not run by default): a short training run under cProfile, in this process;
+- ``render`` (not run by default): the costliest device operators of rendering the training data
+  a batch at once;
+- ``start`` (not run by default): a fresh process's seconds before ``python -m unps.fit`` can log
+  (the interpreter, torch, CUDA's start, Lightning, Hydra, unps);
+- ``paper-<subject>-bf16-mixed`` (``--fit-precisions``): the paper preset with its networks in
+  bfloat16.
 
 Subjects are ``subject=`` names (DiLiGenT objects read from ``--diligent``, the folder holding
 ``pmsData/`` or ``pmsData_crop/``). A rerun skips rows whose
@@ -239,11 +245,52 @@ def profile_training(device: str, steps: int, workers: int | None, out: Path, to
     pstats.Stats(profiler).sort_stats("tottime").print_stats(top)
 
 
+def render_profile(device: str, batches: int, top: int = 15) -> None:
+    """Print the costliest device operators of rendering ``batches`` ``recipe=paper`` batches of 32
+    at once (the training process's share of the training data)."""
+    from torch.profiler import ProfilerActivity, profile
+
+    from unps.lightnet.synthesis import SceneBatch, render_batch
+
+    cfg, data = paper_data(device)
+    where = data.device
+    size = cfg.recipe.batch_size
+    packs = [SceneBatch.of([data.train_set.draw(b * size + i) for i in range(size)]) for b in range(batches)]
+    render_batch(packs[0], where)
+    synchronize(where)
+    activities = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if where.type == "cuda" else [])
+    with profile(activities=activities) as trace:
+        for pack in packs:
+            render_batch(pack, where)
+        synchronize(where)
+    key = "self_cuda_time_total" if where.type == "cuda" else "self_cpu_time_total"
+    print(trace.key_averages().table(sort_by=key, row_limit=top), flush=True)
+
+
+def start_up(device: str) -> dict[str, float]:
+    """Seconds a fresh Python process spends before ``python -m unps.fit`` can log: importing torch,
+    starting CUDA on ``device`` (a tensor made there), importing Lightning, Hydra and unps's fit."""
+    probe = ("import json, time; t = [time.perf_counter()]\n"
+             "import torch; t.append(time.perf_counter())\n"
+             f"torch.zeros(1, device={device!r}).sum().item(); t.append(time.perf_counter())\n"
+             "import lightning; t.append(time.perf_counter())\n"
+             "import hydra, omegaconf; t.append(time.perf_counter())\n"
+             "import unps.fit, unps.pipeline.run; t.append(time.perf_counter())\n"
+             "print(json.dumps([b - a for a, b in zip(t, t[1:])]))")
+    start = time.perf_counter()
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    total = time.perf_counter() - start
+    parts = json.loads(done.stdout.strip().splitlines()[-1])
+    names = ("import torch", "CUDA's start" if device.startswith("cuda") else "first tensor",
+             "import lightning", "import hydra", "import unps.fit")
+    return {"interpreter": total - sum(parts), **dict(zip(names, parts))}
+
+
 def fit_step_times(name: str, diligent: Path, device: str, steps: int) -> dict[str, float]:
     """ms per step of ``preset=paper light=gt``'s fit of subject ``name`` (full resolution, all its
     images, the interreflection solve and cast shadows as at step 0), without Lightning, each
     variant waited for on the device: as the fit runs it, with ``cudnn.benchmark``, and its two
-    networks under bf16 autocast (the physics in float32). Prints the profiler's twelve costliest GPU
+    networks in bfloat16 (``preset.precision=bf16-mixed``). Prints the profiler's twelve costliest GPU
     operators of the plain step."""
     from hydra import compose, initialize_config_module
     from hydra.utils import instantiate
@@ -282,19 +329,9 @@ def fit_step_times(name: str, diligent: Path, device: str, steps: int) -> dict[s
         torch.backends.cudnn.benchmark = True
         times["cudnn.benchmark"] = ms()
         torch.backends.cudnn.benchmark = False
-    for net in (system.normal_net, system.reflectance_net):
-        net.forward = in_bf16(net.forward, where)
-    times["networks in bf16 autocast"] = ms()
+    system.networks_in_bf16 = True
+    times["preset.precision=bf16-mixed"] = ms()
     return times
-
-
-def in_bf16(forward, device: torch.device):
-    """``forward`` under bf16 autocast on ``device``, its tensors handed back in float32."""
-    def wrapped(*args):
-        with torch.autocast(device.type, dtype=torch.bfloat16):
-            out = forward(*args)
-        return tuple(t.float() for t in out) if isinstance(out, tuple) else out.float()
-    return wrapped
 
 
 def synchronising_calls(device: str, diligent: Path, out: Path, steps: int) -> list[tuple[str, int]]:
@@ -387,6 +424,8 @@ def main() -> None:
     parser.add_argument("--subjects", nargs="+", default=["cat", "pot1"])
     parser.add_argument("--default-subject", default="cat", help="the subject of the default command")
     parser.add_argument("--steps", type=int, default=1000, help="steps of the paper-preset fits")
+    parser.add_argument("--fit-precisions", nargs="+", default=["32-true"], choices=["32-true", "bf16-mixed"],
+                        help="preset.precision of the paper-preset fits")
     parser.add_argument("--train-steps", type=int, default=100)
     parser.add_argument("--workers", type=int, default=None, help="recipe.workers of the training rows")
     parser.add_argument("--precisions", nargs="+", default=["32-true", "bf16-mixed"],
@@ -403,12 +442,16 @@ def main() -> None:
     print("|---|---|---|---|---|")
     schedule = [f"preset.steps={args.steps}", f"preset.lr_drop_at={max(1, args.steps * 9 // 10)}"]
     for name in args.subjects if "paper" in args.rows else ():
-        metrics, _ = run(args.out / f"paper-{name}", "unps.fit", *subject_overrides(name, args.diligent),
-                         "preset=paper", "light=gt", *schedule, *device)
-        stages = metrics["stage_seconds"]
-        spent = ", ".join(f"{k} {stages[k]:.1f}" for k in FIT_STAGES if k in stages)
-        print(f"| paper preset, {name}, {args.steps} steps (fit) | {metrics['runtime_s']:.1f} | "
-              f"{metrics.get('normal_mae', float('nan')):.2f} | {memory(metrics)} | {spent} |", flush=True)
+        for precision in args.fit_precisions:
+            suffix = "" if precision == "32-true" else f"-{precision}"
+            metrics, _ = run(args.out / f"paper-{name}{suffix}", "unps.fit",
+                             *subject_overrides(name, args.diligent), "preset=paper", "light=gt",
+                             f"preset.precision={precision}", *schedule, *device)
+            stages = metrics["stage_seconds"]
+            spent = ", ".join(f"{k} {stages[k]:.1f}" for k in FIT_STAGES if k in stages)
+            print(f"| paper preset.precision={precision}, {name}, {args.steps} steps (fit) | "
+                  f"{metrics['runtime_s']:.1f} | {metrics.get('normal_mae', float('nan')):.2f} | "
+                  f"{memory(metrics)} | {spent} |", flush=True)
 
     if "default" in args.rows:
         name = args.default_subject
@@ -474,8 +517,16 @@ def main() -> None:
     if "profile" in args.rows:
         profile_training(args.device, args.train_steps, args.workers, args.out / "profile")
 
+    if "render" in args.rows:
+        render_profile(args.device, 3)
 
-ROWS = ("paper", "default", "train", "data", "loop", "fitstep", "syncs", "profile")
+    if "start" in args.rows:
+        seconds = start_up(args.device)
+        print(f"| a fresh process's start-up | {sum(seconds.values()):.1f} | – | – | "
+              f"{', '.join(f'{k} {v:.1f}' for k, v in seconds.items())} |", flush=True)
+
+
+ROWS = ("paper", "default", "train", "data", "loop", "fitstep", "syncs", "profile", "render", "start")
 
 
 if __name__ == "__main__":

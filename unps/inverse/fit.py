@@ -281,6 +281,10 @@ def build_system(work: Subject, light_directions: np.ndarray, preset: Preset,
                  "the robust initialisation's albedo" if stated is None
                  else f"interreflection.albedo={stated}")
 
+    precision = preset.network_precision(device)
+    if precision == "bf16-mixed" and device.type != "cuda":
+        log.warning("preset.precision=bf16-mixed on %s: bfloat16 convolutions are for a GPU, and may "
+                    "run several times slower than float32 here", device)
     normal_net = NormalNet(work.n_images, preset.width, preset.depth, preset.first_kernel, preset.batch_norm)
     reflectance_net = ReflectanceNet(preset.width, preset.reflectance_width, preset.reflectance_depth,
                                      preset.batch_norm, preset.reflectance_branch)
@@ -291,7 +295,7 @@ def build_system(work: Subject, light_directions: np.ndarray, preset: Preset,
         torch.as_tensor(init.normals).permute(2, 0, 1).contiguous(), solver, preset.schedule,
         refine_lights=refine_lights, true_normals=true_normals, fingerprint=run_fingerprint,
         usable=None if usable is None else torch.as_tensor(usable)[:, None],
-        shadows=preset.cast_shadows,
+        shadows=preset.cast_shadows, precision=precision,
         albedo=torch.as_tensor(init.albedo.mean(-1), dtype=torch.float32)[None, None])
     return system, scale
 

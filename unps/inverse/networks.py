@@ -84,7 +84,7 @@ class NormalNet(nn.Module):
             normals (1, 3, H, W) unit, and features (1, width, H, W).
         """
         features = self.features(inputs)
-        return F.normalize(self.head(features), dim=1, eps=1e-8), features
+        return F.normalize(self.head(features).float(), dim=1, eps=1e-8), features
 
 
 class ReflectanceNet(nn.Module):
@@ -137,7 +137,7 @@ class ReflectanceNet(nn.Module):
         """
         own = self.image_in(self.image_branch(torch.cat([images, specular], 1)))
         x = F.leaky_relu(self.in_norm(own + shared), 0.1)
-        return F.softplus(self.out(self.body(x)))
+        return F.softplus(self.out(self.body(x)).float())
 
 
 def specular_map(normals: torch.Tensor, lights: torch.Tensor) -> torch.Tensor:

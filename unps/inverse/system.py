@@ -175,6 +175,7 @@ class InverseRendering(L.LightningModule):
         shadows: render the shadows that the current surface casts (V_i above).
         albedo: (1, 1, H, W) the initialisation's albedo, for ``preset.residual=albedo`` and the
             hold on dark materials.
+        precision: ``bf16-mixed`` runs both networks under bfloat16 autocast (``preset.precision``).
     """
 
     def __init__(self, normal_net: NormalNet, reflectance_net: ReflectanceNet, images: torch.Tensor,
@@ -182,8 +183,9 @@ class InverseRendering(L.LightningModule):
                  interreflection: Interreflection | None, schedule: Schedule,
                  refine_lights: bool = False, true_normals: torch.Tensor | None = None,
                  fingerprint: str = "", usable: torch.Tensor | None = None, shadows: bool = False,
-                 albedo: torch.Tensor | None = None):
+                 albedo: torch.Tensor | None = None, precision: str = "32-true"):
         super().__init__()
+        self.networks_in_bf16 = precision == "bf16-mixed"
         self.normal_net, self.reflectance_net = normal_net, reflectance_net
         self.schedule, self.interreflection = schedule, interreflection
         self.refine_lights, self.fingerprint, self.shadows = refine_lights, fingerprint, shadows
@@ -229,7 +231,12 @@ class InverseRendering(L.LightningModule):
 
     def normals(self) -> tuple[torch.Tensor, torch.Tensor]:
         """N_o (1, 3, H, W) and the global features."""
-        return self.normal_net(self.normal_input)
+        with self.network_precision():
+            return self.normal_net(self.normal_input)
+
+    def network_precision(self) -> torch.autocast:
+        """bfloat16 autocast on the module's device with ``preset.precision=bf16-mixed``, else off."""
+        return torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=self.networks_in_bf16)
 
     def render(self, index: torch.Tensor, noise: bool = True) -> dict[str, torch.Tensor]:
         """Reconstruct images ``index``: (B,) → dict of (B, C, H, W) maps and N_o, N_ny."""
@@ -247,8 +254,9 @@ class InverseRendering(L.LightningModule):
             inputs = observed + math.sqrt(self.schedule.input_noise_var) * noise_draw
         with stage("reflectance network"):
             specular = specular_map(normals, lights)
-            reflectance = self.reflectance_net(inputs * self.mask, specular,
-                                               self.reflectance_net.global_term(features))
+            with self.network_precision():
+                reflectance = self.reflectance_net(inputs * self.mask, specular,
+                                                   self.reflectance_net.global_term(features))
         reconstruction = (scales[index, None, None, None] * self.visible[index] * reflectance
                           * shading(pseudo, lights))
         return {"normals": normals, "pseudo_normals": pseudo, "reflectance": reflectance,

@@ -56,16 +56,18 @@ def local_frames(normals: torch.Tensor) -> torch.Tensor:
     return torch.stack([tangent, torch.linalg.cross(normals, tangent), normals], -2)
 
 
-def shade_batch(normals: torch.Tensor, mask: torch.Tensor, lobes: LobeTable, others: dict[int, nn.Module],
-                lights: torch.Tensor, intensities: torch.Tensor, albedo: torch.Tensor, shadows: torch.Tensor,
-                budget: int = 2 ** 23) -> torch.Tensor:
-    """:func:`shade` of B scenes at once: analytic materials as one batch of lobes, any other
-    material scene by scene.
+def shade_batch(normals: torch.Tensor, mask: torch.Tensor, pixels: torch.Tensor, lobes: LobeTable,
+                others: dict[int, nn.Module], lights: torch.Tensor, intensities: torch.Tensor,
+                albedo: torch.Tensor, shadows: torch.Tensor, budget: int = 2 ** 23) -> torch.Tensor:
+    """:func:`shade` of B scenes at once: the analytic materials over the pixels that need them,
+    all scenes' together, any other material scene by scene.
 
     Args:
         normals: (B, H, W, 3); mask: (B, H, W) bool; lights: (B, n, 3); intensities: (B, n);
             albedo: (B, H, W, 3); shadows: (B, n, H, W) bool, True where a light is hidden; all on
             one device.
+        pixels: (P,) int64 flat indices into (B, H, W) of the pixels to shade with ``lobes``
+            (:func:`lobe_pixels`); every other pixel of an analytic scene stays 0.
         lobes: the analytic materials (:meth:`LobeTable.of`), on that device.
         others: the scenes whose material is not analytic, by index, each with its material.
         budget: light-pixel pairs shaded at once (memory grows with it).
@@ -75,24 +77,30 @@ def shade_batch(normals: torch.Tensor, mask: torch.Tensor, lobes: LobeTable, oth
     """
     b, h, w, _ = normals.shape
     n = lights.shape[1]
-    images = torch.zeros(b, n, h * w, 3, device=normals.device)
-    analytic = [i for i in range(b) if i not in others]
-    group = max(1, budget // (n * h * w))
-    for first in range(0, len(analytic), group):
-        pick = analytic[first:first + group]
-        index = to_device(torch.tensor(pick), normals.device)
-        frame = local_frames(normals[index].flatten(1, 2))                     # (G, P, 3, 3)
-        wi = torch.einsum("gpij,glj->glpi", frame, lights[index])              # (G, n, P, 3)
-        wo = frame[..., 2][:, None].expand_as(wi)
-        value = lobes.rows(index).values(wi, wo) * wi[..., 2:].clamp_min(0)
-        value = value * albedo[index].flatten(1, 2)[:, None] * intensities[index][:, :, None, None]
-        images[index] = torch.where(mask[index].flatten(1)[:, None, :, None], value, 0.0)
+    values = torch.zeros(b * h * w, n, 3, device=normals.device)
+    flat_normals, flat_albedo = normals.reshape(-1, 3), albedo.reshape(-1, 3)
+    for chunk in pixels.split(max(1, budget // n)):
+        scene = chunk // (h * w)
+        frame = local_frames(flat_normals[chunk])                              # (p, 3, 3)
+        wi = torch.einsum("pij,pnj->pni", frame, lights[scene])                # (p, n, 3)
+        wo = frame[..., 2][:, None].expand_as(wi)                               # view (0, 0, 1)
+        value = lobes.rows(scene).values(wi, wo) * wi[..., 2:].clamp_min(0)
+        values[chunk] = value * flat_albedo[chunk][:, None] * intensities[scene][:, :, None]
+    values = values.view(b, h * w, n, 3)
     for i, brdf in others.items():
         maps = ShapeMaps(normals[i], torch.zeros_like(mask[i], dtype=torch.float32), mask[i])
-        images[i] = shade(maps, brdf.to(normals.device), lights[i], intensities[i], albedo[i],
-                          shadows=False).permute(0, 2, 3, 1).flatten(1, 2)
-    images = images * (~shadows).flatten(2)[..., None]
-    return images.permute(0, 1, 3, 2).unflatten(3, (h, w))
+        values[i] = shade(maps, brdf.to(normals.device), lights[i], intensities[i], albedo[i],
+                          shadows=False).permute(2, 3, 0, 1).flatten(0, 1)
+    values = values * (~shadows).flatten(2).transpose(1, 2)[..., None]
+    return values.permute(0, 2, 3, 1).unflatten(3, (h, w))
+
+
+def lobe_pixels(where: torch.Tensor, brdfs: list) -> torch.Tensor:
+    """(P,) int64 flat indices into (B, H, W) of the pixels :func:`shade_batch` shades with
+    lobes: those ``where`` (B, H, W) bool marks, of the scenes whose material (``brdfs``, B of them;
+    None: no material) is an :class:`~unps.lightnet.brdf.AnalyticBRDF`."""
+    lobed = torch.tensor([isinstance(brdf, AnalyticBRDF) for brdf in brdfs])
+    return torch.nonzero((where & lobed[:, None, None]).flatten()).flatten()
 
 
 @dataclass(frozen=True)

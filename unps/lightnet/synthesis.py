@@ -24,8 +24,8 @@ from unps.device import to_device
 from unps.errors import InputError
 from unps.geometry import ShadowPlan, march_shadows
 from unps.lightnet.brdf import AnalyticBRDF
-from unps.lightnet.materials import (FAMILIES, LobeTable, MaterialBank, coated, darkened, painted, shade,
-                                     shade_batch)
+from unps.lightnet.materials import (FAMILIES, LobeTable, MaterialBank, coated, darkened, lobe_pixels,
+                                     painted, shade, shade_batch)
 from unps.lightnet.rig import LAYOUTS, Camera, Exposure, Exposures, draw_lights, expose, record, record_batch
 from unps.lightnet.shapes import (SHAPES, ShapeMaps, cast_shadows, check_weights, draw_shape, plan_shadows,
                                   sample_generator)
@@ -227,9 +227,12 @@ class SceneBatch:
             (:func:`level_picks`).
         lobes: the analytic materials; others: the other materials, by sample; family: (B,) each
             sample's material family, its index in :data:`~unps.lightnet.materials.FAMILIES`.
-        second_lobes, second_others, coat: the second materials as ``lobes`` and ``others`` (a
-            sample without one: a row of no light), and (B, H, W) where each lies; None when no
-            sample of the batch has one.
+        pixels: the object pixels of the samples whose material is analytic
+            (:func:`~unps.lightnet.materials.lobe_pixels`): those the lobes shade.
+        second_lobes, second_others, coat, second_pixels: the second materials as ``lobes``,
+            ``others`` and ``pixels`` (a sample without one: a row of no light and no pixels; the
+            pixels only those under its coat), and (B, H, W) where each lies; None when no sample
+            of the batch has one.
         exposures: the camera's draws, packed (or None); saturation, perturbation: (B, n, 3, H, W)
             the paper's noise otherwise.
     """
@@ -244,9 +247,11 @@ class SceneBatch:
     lobes: LobeTable
     others: dict[int, torch.nn.Module]
     family: torch.Tensor
+    pixels: torch.Tensor
     second_lobes: LobeTable | None
     second_others: dict[int, torch.nn.Module]
     coat: torch.Tensor | None
+    second_pixels: torch.Tensor | None
     exposures: Exposures | None
     saturation: float | None
     perturbation: torch.Tensor | None
@@ -267,6 +272,8 @@ class SceneBatch:
         lights = torch.stack([scene.lights for scene in scenes])
         seconds = [scene.second for scene in scenes]
         two = any(second is not None for second in seconds)
+        coat = torch.stack([torch.zeros(size) if scene.coat is None else scene.coat for scene in scenes]) \
+            if two else None
         return cls(torch.stack([scene.maps.normals for scene in scenes]), lights,
                    torch.stack([scene.intensities for scene in scenes]),
                    torch.stack([albedo_rgb(scene.albedo, size) for scene in scenes]),
@@ -275,11 +282,11 @@ class SceneBatch:
                    LobeTable.of(brdfs),
                    {i: brdf for i, brdf in enumerate(brdfs) if not isinstance(brdf, AnalyticBRDF)},
                    torch.tensor([FAMILIES.index(scene.family) for scene in scenes]),
+                   lobe_pixels(mask, brdfs),
                    LobeTable.of(seconds) if two else None,
                    {i: brdf for i, brdf in enumerate(seconds)
                     if brdf is not None and not isinstance(brdf, AnalyticBRDF)},
-                   torch.stack([torch.zeros(size) if scene.coat is None else scene.coat for scene in scenes])
-                   if two else None,
+                   coat, lobe_pixels(mask & (coat > 0), seconds) if two else None,
                    Exposures.of([scene.exposure for scene in scenes]) if camera else None,
                    scenes[0].saturation,
                    None if camera else torch.stack([scene.perturbation for scene in scenes]))
@@ -298,11 +305,11 @@ def render_batch(batch: SceneBatch, device: torch.device) -> dict[str, torch.Ten
     normals, lights, intensities, albedo = (to(x) for x in (batch.normals, batch.lights, batch.intensities,
                                                             batch.albedo))
     shadows = march_shadows(batch.shadows, device)
-    images = shade_batch(normals, mask, batch.lobes.to(device), batch.others, lights, intensities, albedo,
-                         shadows)
+    images = shade_batch(normals, mask, to(batch.pixels), batch.lobes.to(device), batch.others, lights,
+                         intensities, albedo, shadows)
     if batch.coat is not None:
-        second = shade_batch(normals, mask, batch.second_lobes.to(device), batch.second_others, lights,
-                             intensities, albedo, shadows)
+        second = shade_batch(normals, mask, to(batch.second_pixels), batch.second_lobes.to(device),
+                             batch.second_others, lights, intensities, albedo, shadows)
         images = torch.lerp(images, second, to(batch.coat)[:, None, None])
     images = images / stack_levels(images, to(batch.level_index), to(batch.level_valid))
     if batch.exposures is not None:
