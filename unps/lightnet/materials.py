@@ -151,14 +151,10 @@ def painted(resolution: int, generator: torch.Generator) -> torch.Tensor:
     Each coat covers where a smooth random field (a 4×4 to 12×12 grid of values, upsampled)
     exceeds a random level, so patches range from a few blobs to fine stripes and spots.
     """
-    u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
     albedo = torch.ones(resolution, resolution, 3)
     for _ in range(int(torch.randint(1, 4, (1,), generator=generator))):
-        cells = int(torch.randint(4, 13, (1,), generator=generator))
-        field = F.interpolate(u(1, 1, cells, cells), size=(resolution, resolution), mode="bicubic",
-                              align_corners=True)[0, 0]
-        coat = field > 0.35 + 0.3 * float(u(1))
-        albedo[coat] = 0.05 + 0.95 * u(3)
+        coat = patches(resolution, generator, cells=(4, 12), level=(0.35, 0.3))
+        albedo[coat] = 0.05 + 0.95 * torch.rand(3, generator=generator)
     return albedo
 
 
@@ -169,11 +165,21 @@ def coated(resolution: int, generator: torch.Generator) -> torch.Tensor:
     the patches cover from about a fifth to four fifths of the image: a glaze over part of a
     pot, a metal inlay, a matte label on a glossy body.
     """
-    u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
-    cells = int(torch.randint(3, 11, (1,), generator=generator))
-    field = F.interpolate(u(1, 1, cells, cells), size=(resolution, resolution), mode="bicubic",
-                          align_corners=True)[0, 0]
-    return (field > 0.3 + 0.4 * float(u(1))).float()
+    return patches(resolution, generator, cells=(3, 10), level=(0.3, 0.4)).float()
+
+
+def patches(resolution: int, generator: torch.Generator, cells: tuple[int, int],
+            level: tuple[float, float]) -> torch.Tensor:
+    """(H, W) bool: where a smooth random field exceeds a random level — patches with sharp edges.
+
+    The field is a square grid of uniform values, ``cells[0]`` to ``cells[1]`` on a side, upsampled
+    bicubically to ``resolution``; the level is ``level[0] + level[1]·U(0, 1)``. Coarse grids give a
+    few blobs, fine ones stripes and spots; a higher level covers less.
+    """
+    side = int(torch.randint(cells[0], cells[1] + 1, (1,), generator=generator))
+    field = F.interpolate(torch.rand(1, 1, side, side, generator=generator), size=(resolution, resolution),
+                          mode="bicubic", align_corners=True)[0, 0]
+    return field > level[0] + level[1] * float(torch.rand(1, generator=generator))
 
 
 def darkened(brdf, factor: float):
