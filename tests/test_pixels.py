@@ -47,6 +47,18 @@ def test_values_in_a_cast_shadow_and_clipped_values_are_left_out(stack):
     assert angular_error(blind, normals).mean() > 0.1    # L1 resists them, but not wholly
 
 
+def test_a_cast_shadow_that_interreflections_light_is_still_left_out(stack):
+    images, colour, normals, lights, start = stack
+    shading = (normals @ lights.T).T
+    rng = np.random.default_rng(1)
+    shadowed = (shading > 0.5) & (rng.random(shading.shape) < 0.2)
+    seen = images.copy()
+    seen[shadowed] *= 0.35                   # a shadow filled by light from the rest of the object
+    solved, ok, used = refine_pixel_normals(seen, colour, start, lights)
+    assert not used[shadowed].any()
+    assert ok.all() and angular_error(solved, normals).max() < 1e-3
+
+
 def test_l1_passes_over_a_highlight_that_least_squares_follows(stack):
     images, colour, normals, lights, start = stack
     shading = (normals @ lights.T).T
