@@ -108,7 +108,10 @@ def test_a_jar_seen_through_the_normals_it_shows_is_the_jar_seen_through_all_of_
     c, s, ct, st = math.cos(tilt), math.sin(tilt), math.cos(turn), math.sin(turn)
     rotation = torch.tensor([[ct, -st, 0], [st, ct, 0], [0, 0, 1.0]]) @ torch.tensor(
         [[1.0, 0, 0], [0, c, -s], [0, s, c]])
-    points, normals = jar.points @ rotation.T, jar.normals() @ rotation.T
+    # turned as jar_view turns them, each coordinate's products summed in order: a (p, 3) × (3, 3)
+    # matmul may fuse them (an Intel Xeon's kernels do; an AMD EPYC's did not), which is not the point
+    points, normals = (torch.stack([lathe._rotated(v.unbind(-1), row) for row in rotation], -1)
+                       for v in (jar.points, jar.normals()))
     low, high = points.min(0).values, points.max(0).values
     points = (points - (low + high) / 2) * (extent / float((high - low)[:2].max()))
     whole = lathe.rasterise(*points.unbind(-1), normals, resolution, two_sided=wall == 0)

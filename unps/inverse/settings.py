@@ -35,6 +35,10 @@ class Preset:
             (:func:`unps.data.checks.black_everywhere`: the images hold no shading there) are
             those of the surface continued from the pixels around them
             (:func:`unps.geometry.continue_surface`), not the normal network's guess.
+        continue_held: beyond the paper, the read-out's normals of the pixels of a dark material
+            that the fit held toward N_init (``dark_hold``; :func:`unps.inverse.fit.held_from_solve`)
+            and no highlight lights are taken this share of the way (in [0, 1]; 0: not at all) to
+            the surface continued across them: their images pin them no better than N_init does.
         refine_pixels: beyond the paper, a fit on a coarser working grid has each pixel's normal
             on the subject's grid solved against its own images under the fitted reflectance
             (:func:`unps.inverse.pixels.refine_pixel_normals`), unless the images are too noisy
@@ -62,6 +66,7 @@ class Preset:
     batch_norm: bool = True
     init: str = "robust"
     continue_black: bool = True
+    continue_held: float = 0.25
     refine_pixels: bool = True
     highlights: bool = True
     precision: str = "auto"
@@ -74,6 +79,9 @@ class Preset:
                              f"{self.reflectance_branch!r}")
         if self.init not in INITS:
             raise InputError(f"preset.init must be one of {', '.join(INITS)}, got {self.init!r}")
+        if isinstance(self.continue_held, bool) or not isinstance(self.continue_held, (int, float)) \
+                or not 0 <= self.continue_held <= 1:
+            raise InputError(f"preset.continue_held must be a share in [0, 1], got {self.continue_held!r}")
         if self.precision not in PRECISIONS:
             raise InputError(f"preset.precision must be one of {', '.join(PRECISIONS)}, "
                              f"got {self.precision!r}")

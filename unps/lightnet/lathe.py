@@ -141,7 +141,8 @@ def jar_view(radius, height: float, floor: float, wall: float, tilt: float, turn
 
 def _rotated(vectors: tuple[torch.Tensor, ...], row: torch.Tensor) -> torch.Tensor:
     """(p,) one coordinate of vectors given as their (p,) x, y, z, turned by a rotation whose
-    row is ``row`` (3,): the products summed in order, as a (p, 3) × (3, 3) product sums them."""
+    row is ``row`` (3,): the products summed in order, the same bits on every CPU (a (p, 3) × (3, 3)
+    matmul may fuse them, as an Intel Xeon's kernels do)."""
     x, y, z = vectors
     return x * row[0] + y * row[1] + z * row[2]
 
