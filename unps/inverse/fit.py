@@ -128,18 +128,16 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
         if preset.highlights:
             normals, highlit = with_highlights(cropped, normals, directions, scales, black)
             highlight_share = float(highlit.sum() / cropped.mask.sum())
-        held_share = None
-        if preset.continue_held > 0 and held is not None:
-            held &= cropped.mask & ~highlit & ~black
-            held_share = float(held.sum() / cropped.mask.sum())
-            if held.any():
-                log.info("%.1f%% of the object is of a dark material the fit held and no highlight lights: "
-                         "its normals are taken %.0f%% of the way to the surface continued from the pixels "
-                         "around it (preset.continue_held)", 100 * held_share, 100 * preset.continue_held)
-        else:
-            held = np.zeros_like(black)
-        normals = with_surface_continued(normals, cropped.mask, black if preset.continue_black else
-                                         np.zeros_like(black), held, preset.continue_held)
+        none = np.zeros_like(black)
+        continuing = held is not None and preset.continue_held > 0
+        unlit_held = held & cropped.mask & ~highlit & ~black if continuing else none
+        held_share = float(unlit_held.sum() / cropped.mask.sum()) if continuing else None
+        if unlit_held.any():
+            log.info("%.1f%% of the object is of a dark material the fit held and no highlight lights: "
+                     "its normals are taken %.0f%% of the way to the surface continued from the pixels "
+                     "around it (preset.continue_held)", 100 * held_share, 100 * preset.continue_held)
+        normals = with_surface_continued(normals, cropped.mask, black if preset.continue_black else none,
+                                         unlit_held, preset.continue_held)
         normals, albedo = on_subject_grid(normals, cropped, subject, directions, scales)
     black_share = float(black.sum() / cropped.mask.sum())
     if black.any():
