@@ -1,4 +1,6 @@
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import nbformat
@@ -286,6 +288,17 @@ def test_nir_benchmark_reads_one_row_per_seed_and_averages(tmp_path):
     assert benchmark.unps_rows(tmp_path, "ball-gt-unps-fast", ["subject=ball"], [0])[0]["normal_mae"] == 2.0
     with pytest.raises(ValueError, match=r"lacks \['preset.input_noise_var=0.3'\] and has \[\]"):
         benchmark.unps_rows(tmp_path, "ball-gt-unps-fast", ["subject=ball", "preset.input_noise_var=0.3"], [0])
+
+
+def test_nir_benchmark_names_a_missing_diligent_folder(tmp_path):
+    """--diligent points the benchmark at DiLiGenT; a folder that is not there is named, nothing run."""
+    missing = tmp_path / "no-diligent"
+    done = subprocess.run([sys.executable, "experiments/neural_inverse_rendering/benchmark.py", "--only",
+                           "diligent", "--diligent", str(missing), "--out", str(tmp_path / "runs")],
+                          capture_output=True, text=True, cwd=Path(__file__).parents[1])
+    assert done.returncode == 1
+    assert f"{missing}: DiLiGenT not found (give --diligent" in done.stderr
+    assert not (tmp_path / "runs").exists()
 
 
 def test_light_benchmark_normals_reads_finished_rows_refuses_mixed_settings_and_keeps_light_sets_apart(

@@ -89,19 +89,20 @@ def mae(results: list[dict]) -> str:
     return text if len(values) == 1 else f"{text} ({' / '.join(f'{v:.2f}' for v in values)})"
 
 
-def diligent_subject(name: str) -> list[str]:
-    """The object by name, so that the crops are read the way they were made (quantization=auto)."""
-    return [f"subject={name}", f"paths.diligent_dir={DILIGENT}"]
+def diligent_subject(name: str, data: Path) -> list[str]:
+    """The object by name in the DiLiGenT folder ``data``, so that the crops are read the way they
+    were made (quantization=auto)."""
+    return [f"subject={name}", f"paths.diligent_dir={data}"]
 
 
-def diligent(out: Path, preset: str, objects: list[str], lights: list[str], extra: list[str],
-             seeds: list[int]) -> None:
+def diligent(out: Path, data: Path, preset: str, objects: list[str], lights: list[str],
+             extra: list[str], seeds: list[int]) -> None:
     print(f"\nDiLiGenT, 96 images, preset={preset} {' '.join(extra)} (normal MAE °; unps time and peak "
           f"memory of the first seed)")
     print(f"{'object':<6} {'light':<9} {'light °':>7} {'RPCA °':>7} {'paper °':>7} {'grid':>9} {'s':>6} "
           f"{'s/step':>6} {'GB':>5}  unps °")
     for name in objects:
-        subject = diligent_subject(name)
+        subject = diligent_subject(name, data)
         for light in lights:
             start = "estimated" if light == "refine" else light     # the lights refinement starts from
             rpca = run(out / f"{name}-{start}-rpca", *subject, f"light={start}", "method=rpca")
@@ -129,8 +130,8 @@ def synthetic(out: Path, preset: str, extra: list[str], seeds: list[int], subjec
               f"{fits[-1][0]['runtime_s']:6.0f}  {' | '.join(mae(f) for f in fits)}", flush=True)
 
 
-def paper_speed(out: Path, steps: int) -> None:
-    subject = diligent_subject("pot1")
+def paper_speed(out: Path, data: Path, steps: int) -> None:
+    subject = diligent_subject("pot1", data)
     result = run(out / f"pot1-paper-{steps}steps", *subject, "light=gt", "method=unps", "preset=paper",
                  f"preset.steps={steps}")
     h, w = result["fit_resolution"]
@@ -143,6 +144,9 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--out", type=Path, default=Path("runs/neural_inverse_rendering"))
     parser.add_argument("--preset", default="fast")
+    parser.add_argument("--diligent", type=Path, default=DILIGENT,
+                        help="the folder holding pmsData/ or pmsData_crop/ (default: ../shared/data/DiLiGenT "
+                             "beside the repository)")
     parser.add_argument("--only", choices=["diligent", "synthetic", "speed"])
     parser.add_argument("--paper-steps", type=int, default=5)
     parser.add_argument("--objects", nargs="+", choices=OBJECTS, default=list(OBJECTS),
@@ -161,13 +165,14 @@ def main():
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, {device}; "
           f"torch {torch.__version__}")
     if args.only in (None, "diligent"):
-        if not DILIGENT.is_dir():
-            sys.exit(f"{DILIGENT}: DiLiGenT not found (../shared/data beside the repository)")
-        diligent(args.out, args.preset, args.objects, args.lights, args.set, args.seeds)
+        if not args.diligent.is_dir():
+            sys.exit(f"{args.diligent}: DiLiGenT not found (give --diligent, or put ../shared/data "
+                     f"beside the repository)")
+        diligent(args.out, args.diligent, args.preset, args.objects, args.lights, args.set, args.seeds)
     if args.only in (None, "synthetic"):
         synthetic(args.out, args.preset, args.set, args.seeds, args.subjects, args.interreflection)
     if args.only in (None, "speed"):
-        paper_speed(args.out, args.paper_steps)
+        paper_speed(args.out, args.diligent, args.paper_steps)
 
 
 if __name__ == "__main__":
