@@ -498,3 +498,12 @@ def test_selfcal_steps_reads_each_mark_off_the_trace_and_counts_raises(capsys):
     with pytest.raises(SystemExit):
         study.main(["--steps", "300", "--marks", "250", "400"])
     assert "--marks [250, 400]: each must be a multiple of 100 up to --steps (300)" in capsys.readouterr().err
+
+
+def test_grid_floor_names_a_missing_diligent_folder(tmp_path, capsys):
+    """--diligent points the grid-floor study at DiLiGenT; a folder that is not there is named."""
+    grid_floor = load_script("grid_floor", "experiments/calibrated/grid_floor.py")
+    missing = tmp_path / "no-diligent"
+    with pytest.raises(SystemExit, match=f"{missing}: DiLiGenT not found \\(give --diligent"):
+        grid_floor.main(["--diligent", str(missing)])
+    assert capsys.readouterr().out == ""

@@ -1,6 +1,6 @@
 """The working grid's floor: the error a perfect fit on the block-averaged grid would still have.
 
-    python experiments/calibrated/grid_floor.py [--factors 1 2 3 4] [--objects ball cat pot1]
+    python experiments/calibrated/grid_floor.py [--factors 1 2 3 4] [--objects ball cat pot1] [--diligent DIR]
 
 ``preset=fast`` fits objects of more than ``max_pixels`` object pixels on a grid ``f`` times
 coarser and brings the normals back with the robust initialisation's finer detail added
@@ -49,13 +49,17 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--objects", nargs="+", default=["ball", "cat", "pot1"])
     parser.add_argument("--factors", nargs="+", type=int, default=[2, 3, 4])
+    parser.add_argument("--diligent", type=Path, default=DILIGENT,
+                        help="the folder holding pmsData/ or pmsData_crop/ (default: ../shared/data/DiLiGenT "
+                             "beside the repository)")
     args = parser.parse_args(argv)
-    if not DILIGENT.is_dir():
-        sys.exit(f"{DILIGENT}: DiLiGenT not found (../shared/data beside the repository)")
+    if not args.diligent.is_dir():
+        sys.exit(f"{args.diligent}: DiLiGenT not found (give --diligent, or put ../shared/data beside "
+                 f"the repository)")
     torch.set_num_threads(min(2, torch.get_num_threads()))
     print(f"{'object':<7}{'fast ×':>7}{'RPCA full':>10} {'factor':>7}{'plain':>8}{'detail':>8}")
     for name in args.objects:
-        subject = read_diligent_object(DILIGENT, name).crop_to_mask(CROP_MARGIN)
+        subject = read_diligent_object(args.diligent, name).crop_to_mask(CROP_MARGIN)
         fast = working_factor(int(subject.mask.sum()), FAST_MAX_PIXELS)
         init = robust_init(subject, subject.light_directions, device="cpu").normals
         full = float(angular_error(init, subject.normals)[subject.mask].mean())

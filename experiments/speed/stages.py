@@ -3,6 +3,7 @@
     python experiments/speed/stages.py                                 # ball, cat, pot1; fast, light=gt
     python experiments/speed/stages.py --subjects ball --set preset.steps=200
     python experiments/speed/stages.py --set preset=paper preset.steps=20 --subjects pot1
+    python experiments/speed/stages.py --diligent ~/data/DiLiGenT      # DiLiGenT elsewhere than ../shared
 
 Each subject is fitted in this process by :func:`unps.fit.fit` (``method=unps preset=fast
 light=gt`` unless ``--set`` says otherwise), into ``<out>/<subject>/`` (deleted first, so no
@@ -47,8 +48,9 @@ def machine() -> str:
     return f"{model}, {os.cpu_count()} cores, torch {torch.__version__} ({torch.get_num_threads()} threads)"
 
 
-def profile(subject: str, overrides: list[str], out: Path) -> dict:
-    """Fit one subject and return its stage seconds, steps, wall time and normal MAE."""
+def profile(subject: str, overrides: list[str], out: Path, diligent: Path = DILIGENT) -> dict:
+    """Fit one subject (a DiLiGenT object is read from ``diligent``) and return its stage
+    seconds, steps, wall time and normal MAE."""
     from hydra import compose, initialize_config_module
 
     from unps.pipeline import fit
@@ -57,7 +59,7 @@ def profile(subject: str, overrides: list[str], out: Path) -> dict:
     shutil.rmtree(run_dir, ignore_errors=True)
     with initialize_config_module("unps.conf", version_base=None):
         cfg = compose("fit", overrides=[f"subject={subject}", "method=unps", "preset=fast", "light=gt",
-                                        f"paths.diligent_dir={DILIGENT}",
+                                        f"paths.diligent_dir={diligent}",
                                         f"paths.output_dir={run_dir}", *overrides])
     start = time.perf_counter()
     with recording() as seconds:
@@ -91,20 +93,23 @@ def table(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def main() -> None:
+def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--subjects", nargs="+", default=["ball", "cat", "pot1"])
     parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
                         help="overrides for every fit (e.g. preset.steps=200)")
     parser.add_argument("--out", type=Path, default=Path("runs/speed-profile"))
-    args = parser.parse_args()
+    parser.add_argument("--diligent", type=Path, default=DILIGENT,
+                        help="the folder holding pmsData/ or pmsData_crop/, for DiLiGenT's subjects "
+                             "(default: ../shared/data/DiLiGenT beside the repository)")
+    args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     args.out.mkdir(parents=True, exist_ok=True)
     results = []
     for subject in args.subjects:
         print(f"profiling {subject} ({' '.join(args.set) or 'fast preset, light=gt'}) …", flush=True)
-        results.append(profile(subject, args.set, args.out))
+        results.append(profile(subject, args.set, args.out, args.diligent))
     heading = f"machine: {machine()}\nsettings: method=unps preset=fast light=gt {' '.join(args.set)}\n"
     text = heading + "\n" + table(results) + "\n"
     print(text)
