@@ -76,6 +76,17 @@ def to_device(tensor: torch.Tensor, device: torch.device) -> torch.Tensor:
     return tensor.to(device, non_blocking=True)
 
 
+def native_bfloat16(device: torch.device) -> bool:
+    """Whether ``device`` computes bfloat16 convolutions in hardware: a CUDA GPU, or a CPU with
+    AMX tiles (Intel Xeon since Sapphire Rapids; torch's own check). Elsewhere oneDNN emulates
+    them: a 2-core AMD EPYC ran the fit's networks 6× slower in bfloat16 than in float32, a 2-core
+    Intel Xeon with AMX 0.7–0.8× (``experiments/speed/README.md``)."""
+    if device.type == "cuda":
+        return True
+    has_amx = getattr(torch.cpu, "_is_amx_tile_supported", None)
+    return device.type == "cpu" and has_amx is not None and bool(has_amx())
+
+
 def peak_memory_gb(device: torch.device) -> float | None:
     """The most GPU memory torch has held on ``device`` since the process started, in GiB; None on
     the CPU."""
