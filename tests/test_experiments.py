@@ -507,3 +507,21 @@ def test_grid_floor_names_a_missing_diligent_folder(tmp_path, capsys):
     with pytest.raises(SystemExit, match=f"{missing}: DiLiGenT not found \\(give --diligent"):
         grid_floor.main(["--diligent", str(missing)])
     assert capsys.readouterr().out == ""
+
+
+def test_light_benchmark_normals_tells_each_light_stages_mean_error_ratio_and_raises():
+    """The uncalibrated rows end with the lights after each stage: the mean direction error, its
+    ratio to the network's, and the objects a stage left more than 1° / 2° worse."""
+    normals = load_script("lb_normals", "experiments/light_benchmark/normals.py")
+
+    def run(*errors):
+        return [{"stage": s, "light_dir_mae": e} for s, e in zip(("network", "selfcal", "fit"), errors)]
+
+    lines = normals.stage_lines(["a", "b", "c"], [run(6.0, 4.0, 3.0), run(3.0, 5.5, 5.0), run(9.0, 10.5, 7.0)])
+    assert [line.split()[:5] for line in lines[1:]] == [
+        ["network", "6.00°", "1.00", "0", "0"], ["selfcal", "6.67°", "1.11", "2", "1"],
+        ["fit", "5.00°", "0.83", "0", "0"]]
+    assert lines[2].endswith("+2.50° (b)")
+    assert "worst" not in lines[3] and "(" not in lines[3]
+    with pytest.raises(ValueError, match="different light stages"):
+        normals.stage_lines(["a", "b"], [run(1.0, 2.0, 3.0), run(1.0, 2.0)])

@@ -18,7 +18,10 @@ Woodham's least squares, the robust initialisation and the fit
 ``<out>/<object>-<method>/`` (a rerun skips finished rows and resumes a killed fit). The captures
 are rendered on first use into ``--cache``, as the light benchmark does. ``--set`` passes
 overrides to every unps row (keep one ``--tag`` per setting). Printed: the mean angular error per
-object and method, the fit's time, and the means.
+object and method, the fit's time, and the means; with estimated lights also each object's light
+error and, stage by stage (the network, the reversal test, the self-calibration, the fit's own
+step), the lights' mean direction error, its ratio to the network's and the objects the stage
+left more than 1° / 2° worse (:func:`stage_lines`).
 
 None of these objects, materials or shape seeds feeds training or was used to choose a default,
 so they stand for captures unps has not seen: a setting that helps on ball, cat and pot1 should
@@ -82,6 +85,41 @@ def run_folder(cache: Path, tag: str, lights: str) -> Path:
     return cache / "normals" / (tag if lights == "96" else f"{tag}-{lights}")
 
 
+RAISED, RAISED_TWICE = 1.0, 2.0     # degrees, as benchmark.py flags a stage
+
+
+def stage_lines(names: list[str], stages: list[list[dict]]) -> list[str]:
+    """One line per light stage of the runs (``metrics.json`` ``light_stages``; ``stages[k]`` is
+    object ``names[k]``'s, in the order the run took them, the fit's own step last where it learnt
+    the lights): the mean direction error after it, its ratio to the network's, how many objects
+    it left more than 1° and 2° above the stage before, and the worst such raise.
+
+    >>> lines = stage_lines(["a", "b"], [[{"stage": "network", "light_dir_mae": 4.0},
+    ...                                   {"stage": "fit", "light_dir_mae": 2.0}],
+    ...                                  [{"stage": "network", "light_dir_mae": 6.0},
+    ...                                   {"stage": "fit", "light_dir_mae": 7.5}]])
+    >>> print("\\n".join(lines))
+    stage       lights  ÷ network  >1° raises  >2° raises  worst raise
+    network      5.00°       1.00           0           0
+    fit          4.75°       0.95           1           0  +1.50° (b)
+    """
+    order = [stage["stage"] for stage in stages[0]]
+    if any([stage["stage"] for stage in run] != order for run in stages):
+        raise ValueError("the runs took different light stages: " + ", ".join(
+            f"{name}: {[stage['stage'] for stage in run]}" for name, run in zip(names, stages)))
+    errors = np.array([[stage["light_dir_mae"] for stage in run] for run in stages])   # (objects, stages)
+    lines = [f"{'stage':<10}{'lights':>8}{'÷ network':>11}{'>1° raises':>12}{'>2° raises':>12}  worst raise"]
+    for k, stage in enumerate(order):
+        raises = errors[:, k] - errors[:, k - 1] if k else np.zeros(len(names))
+        worst = int(np.argmax(raises))
+        line = (f"{stage:<10}{errors[:, k].mean():>7.2f}°{errors[:, k].mean() / errors[:, 0].mean():>11.2f}"
+                f"{int((raises > RAISED).sum()):>12}{int((raises > RAISED_TWICE).sum()):>12}")
+        if raises[worst] > 0:
+            line += f"  {raises[worst]:+.2f}° ({names[worst]})"
+        lines.append(line)
+    return lines
+
+
 def storage_means(storages: list[str], errors: dict[str, list[float]]) -> list[str]:
     """One line per way of storing the captures (8-bit ``floor`` / ``round``, 16-bit): each
     method's mean error over the objects stored so, ``errors[method][k]`` being object k's, which
@@ -140,6 +178,8 @@ def main(argv=None) -> None:
           + (f"{'lights':>9}" if estimated else ""))
     errors: dict[str, list[float]] = {m: [] for m in args.methods}
     light_errors: list[float] = []
+    light_stages: list[list[dict]] = []
+    names: list[str] = []
     storages: list[str] = []
     for obj in scenes.OBJECTS:
         if args.names and obj.name not in args.names:
@@ -153,8 +193,10 @@ def main(argv=None) -> None:
             line += f"{metrics['normal_mae']:>8.2f}°"
         if "unps" in rows:
             line += f"{rows['unps']['runtime_s']:>8.0f}"
+        names.append(obj.name)
         if estimated:  # every method's run estimates the same lights; the first one's error
             light_errors.append(next(iter(rows.values()))["light_dir_mae"])
+            light_stages.append(rows.get("unps", next(iter(rows.values())))["light_stages"])
             line += f"{light_errors[-1]:>8.2f}°"
         print(line, flush=True)
     print(f"{'mean':<24}" + "".join(f"{np.mean(e):>8.2f}°" for e in errors.values())
@@ -162,6 +204,10 @@ def main(argv=None) -> None:
              if estimated else ""))
     for line in storage_means(storages, errors):
         print(line)
+    if estimated:
+        print(f"\nthe lights after each stage{' (unps: the fit learns them last)' if 'unps' in rows else ''}")
+        for line in stage_lines(names, light_stages):
+            print(line)
     if "unps" in errors and len(args.methods) > 1:
         for method in (m for m in args.methods if m != "unps"):
             better = sum(u < b for u, b in zip(errors["unps"], errors[method]))
