@@ -1,4 +1,5 @@
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -525,3 +526,22 @@ def test_light_benchmark_normals_tells_each_light_stages_mean_error_ratio_and_ra
     assert "worst" not in lines[3] and "(" not in lines[3]
     with pytest.raises(ValueError, match="different light stages"):
         normals.stage_lines(["a", "b"], [run(1.0, 2.0, 3.0), run(1.0, 2.0)])
+
+
+def test_light_benchmark_runs_are_held_by_one_process_at_a_time(tmp_path):
+    """A row being fitted by a live process is not started again beside it (its run folder holds
+    the process id); a mark left by a process that has ended is taken over, and removed after."""
+    runs = load_script("lb_runs", "experiments/light_benchmark/runs.py")
+    normals = load_script("lb_normals", "experiments/light_benchmark/normals.py")
+    obj = normals.scenes.OBJECTS[0]
+    busy = tmp_path / f"{obj.name}-rpca"
+    busy.mkdir()
+    (busy / runs.MARK).write_text(str(os.getppid()))          # a live process: the test's parent
+    with pytest.raises(SystemExit, match=f"being run by process {os.getppid()}"):
+        normals.run_row(tmp_path / "nowhere", obj, "rpca", "gt", [], tmp_path)
+    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                           capture_output=True, text=True, check=True)
+    (busy / runs.MARK).write_text(ended.stdout.strip())       # a process that has ended
+    with runs.held(busy):
+        assert (busy / runs.MARK).read_text() == str(os.getpid())
+    assert not (busy / runs.MARK).exists()

@@ -53,7 +53,8 @@ LIGHTS = ("gt", "estimated", "selfcal", "refine")
 
 def run_row(folder: Path, obj: scenes.BenchmarkObject, method: str, light: str,
             settings: list[str], out: Path) -> dict:
-    """One ``python -m unps.fit`` run (skipped when its metrics.json exists); its metrics."""
+    """One ``python -m unps.fit`` run (skipped when its metrics.json exists; refused while another
+    process runs it, :func:`runs.held`); its metrics."""
     run_dir = out / f"{obj.name}-{method}"
     metrics = run_dir / "metrics.json"
     if not metrics.is_file():
@@ -61,9 +62,13 @@ def run_row(folder: Path, obj: scenes.BenchmarkObject, method: str, light: str,
                    f"subject.name={obj.name}", f"subject.quantization={scenes.quantization(obj.storage)}",
                    f"light={light}", f"method={method}", f"hydra.run.dir={run_dir}",
                    *(settings if method == "unps" else [])]
-        print(f"  running {obj.name} {method}", flush=True)
-        done = subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                              env={**os.environ, "HYDRA_FULL_ERROR": "1"})
+        try:
+            with runs.held(run_dir):
+                print(f"  running {obj.name} {method}", flush=True)
+                done = subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                                      env={**os.environ, "HYDRA_FULL_ERROR": "1"})
+        except RuntimeError as busy:
+            sys.exit(str(busy))
         if done.returncode != 0:
             sys.exit(f"{' '.join(command)} failed:\n{done.stderr[-2000:]}")
     return json.loads(metrics.read_text())

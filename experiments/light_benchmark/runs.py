@@ -3,7 +3,12 @@
 from __future__ import annotations
 
 import json
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+
+MARK = "running.pid"
 
 
 def claim(out: Path, made_with) -> None:
@@ -23,6 +28,58 @@ def claim(out: Path, made_with) -> None:
         return
     out.mkdir(parents=True, exist_ok=True)
     recorded.write_text(json.dumps(made_with) + "\n")
+
+
+@contextmanager
+def held(run_dir: Path) -> Iterator[None]:
+    """Mark ``run_dir`` as being run by this process for the length of the block (a file
+    ``running.pid`` holding its process id), so that another process of the benchmark — a second
+    half run beside this one, or a table read before the rows are done — does not start the same
+    run beside it. A mark left by a process that has ended is taken over.
+
+    Raises:
+        RuntimeError: a live process holds the folder; the message names it.
+    """
+    run_dir.mkdir(parents=True, exist_ok=True)
+    mark = run_dir / MARK
+    for _ in range(2):
+        try:
+            descriptor = os.open(mark, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        except FileExistsError:
+            holder = _holder(mark)
+            if holder is not None and _alive(holder):
+                raise RuntimeError(f"{run_dir} is being run by process {holder}: wait for it to "
+                                   f"finish, then read the table again") from None
+            mark.unlink(missing_ok=True)
+            continue
+        with os.fdopen(descriptor, "w") as file:
+            file.write(str(os.getpid()))
+        break
+    else:
+        raise RuntimeError(f"{run_dir}: could not take {MARK} from a process that has ended")
+    try:
+        yield
+    finally:
+        mark.unlink(missing_ok=True)
+
+
+def _holder(mark: Path) -> int | None:
+    """The process id in ``mark``, or None where it cannot be read."""
+    try:
+        return int(mark.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` is running (on this machine)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def summaries(cases, out: Path, run, summarise, progress, report_only: bool = False) -> dict:
