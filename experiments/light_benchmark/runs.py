@@ -35,28 +35,20 @@ def held(run_dir: Path) -> Iterator[None]:
     """Mark ``run_dir`` as being run by this process for the length of the block (a file
     ``running.pid`` holding its process id), so that another process of the benchmark — a second
     half run beside this one, or a table read before the rows are done — does not start the same
-    run beside it. A mark left by a process that has ended is taken over.
+    run beside it. A mark left by a process that has ended is taken over. (Two processes reaching
+    the same folder in the same instant are not kept apart: the benchmark's halves name disjoint
+    objects.)
 
     Raises:
         RuntimeError: a live process holds the folder; the message names it.
     """
-    run_dir.mkdir(parents=True, exist_ok=True)
     mark = run_dir / MARK
-    for _ in range(2):
-        try:
-            descriptor = os.open(mark, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
-        except FileExistsError:
-            holder = _holder(mark)
-            if holder is not None and _alive(holder):
-                raise RuntimeError(f"{run_dir} is being run by process {holder}: wait for it to "
-                                   f"finish, then read the table again") from None
-            mark.unlink(missing_ok=True)
-            continue
-        with os.fdopen(descriptor, "w") as file:
-            file.write(str(os.getpid()))
-        break
-    else:
-        raise RuntimeError(f"{run_dir}: could not take {MARK} from a process that has ended")
+    holder = _holder(mark)
+    if holder is not None and _alive(holder):
+        raise RuntimeError(f"{run_dir} is being run by process {holder}: wait for it to finish, "
+                           f"then read the table again")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    mark.write_text(str(os.getpid()))
     try:
         yield
     finally:
