@@ -545,3 +545,20 @@ def test_light_benchmark_runs_are_held_by_one_process_at_a_time(tmp_path):
     with runs.held(busy):
         assert (busy / runs.MARK).read_text() == str(os.getpid())
     assert not (busy / runs.MARK).exists()
+
+
+def test_light_stage_timing_table_gives_each_stages_median_and_the_last_rounds_lights():
+    """experiments/speed/light_stages.py: the median over the rounds of each light stage's seconds,
+    before → now, and the light error of the last round."""
+    light_stages = load_script("light_stages", "experiments/speed/light_stages.py")
+
+    def run(seconds: float, error: float) -> dict:
+        return {"light network": 2.0, "reversal test": seconds / 10, "self-calibration": seconds,
+                "lights": seconds + 5, "light_dir_mae": error}
+
+    runs = {("cat", "before"): [run(30.0, 4.6), run(50.0, 4.6), run(31.0, 4.6074)],
+            ("cat", "now"): [run(26.0, 4.6), run(24.0, 4.6), run(40.0, 4.6084)]}
+    header, rule, row = light_stages.table(runs, ["cat"]).splitlines()
+    assert header.startswith("| subject | light network (s), before → now |")
+    assert rule == "|---" * 6 + "|"
+    assert row == "| cat | 2.0 → 2.0 | 3.1 → 2.6 | 31.0 → 26.0 | 36.0 → 31.0 | 4.6074 → 4.6084 |"

@@ -10,7 +10,7 @@ from unps.data.subject import Subject
 from unps.errors import InputError
 from unps.lights import Lights, light_errors
 from unps.lights.factorization import normals_under
-from unps.lights.model import DepthPyramid, SelfCalibrationModel, normals_from_depth
+from unps.lights.model import MIN_EXPONENT, DepthPyramid, SelfCalibrationModel, SpecularLobes, normals_from_depth
 from unps.lights.selfcal import SelfCalibration, self_calibrate
 from unps.metrics import angular_error
 
@@ -70,6 +70,22 @@ def test_depth_pyramid_starts_at_its_start_and_moves_coarse_shape_in_one_step():
     torch.testing.assert_close(pyramid(), start)
     pyramid.corrections[2].data.fill_(1.0)
     torch.testing.assert_close(pyramid(), start + 4.0)
+
+
+def test_the_specular_lobes_and_their_gradient_are_autograds_own():
+    torch.manual_seed(0)
+    sharpness = torch.tensor([10.0, 30.0, 100.0, 300.0], dtype=torch.float64)
+    cosine = (1 - 0.3 * torch.rand(40, 12, dtype=torch.float64)).requires_grad_()   # κ = 300 cut on some
+    weights = torch.rand(4, dtype=torch.float64).requires_grad_()
+    assert torch.autograd.gradcheck(SpecularLobes.apply, (cosine, weights, sharpness))
+    plain = torch.einsum("k,kmn->mn", weights,
+                         torch.exp((sharpness[:, None, None] * (cosine - 1)).clamp_min(MIN_EXPONENT)))
+    upstream = torch.randn(40, 12, dtype=torch.float64)
+    expected = torch.autograd.grad(plain, (cosine, weights), upstream)
+    lobes = SpecularLobes.apply(cosine, weights, sharpness)
+    torch.testing.assert_close(lobes, plain, rtol=1e-12, atol=0)
+    for found, wanted in zip(torch.autograd.grad(lobes, (cosine, weights), upstream), expected):
+        torch.testing.assert_close(found, wanted, rtol=1e-12, atol=1e-22)
 
 
 def test_the_surface_under_the_true_lights_is_the_true_one():

@@ -149,6 +149,7 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
                          f"{subject.name!r} has {subject.n_images}: use light=estimated (the "
                          f"network's lights) or light=gt")
     start = time.perf_counter()
+    subject = subject.crop_to_mask(1)              # the working grid's crop: the same pixels, less to divide
     observed = with_lights(subject, lights)              # divided by the first guess's intensities
     gray = observed.images[:, subject.mask].mean(-1).T.astype(np.float64)       # (m, n)
     if not np.any(gray > 0):
