@@ -485,6 +485,40 @@ def test_light_moves_splits_a_move_of_the_lights_into_a_common_turn_and_the_rest
     assert "give BEFORE and AFTER run folders, or --selfcal" in capsys.readouterr().err
 
 
+def test_light_moves_splits_off_a_common_linear_map_of_the_scaled_lights(tmp_path, capsys):
+    study = load_script("lb_light_moves", "experiments/light_benchmark/light_moves.py")
+    truth = render_lambertian("sphere", size=8, n_lights=12, seed=1).light_directions.astype(np.float64)
+    bas_relief = np.array([[1, 0, 0], [0, 1, 0], [0.2, -0.1, 0.8]])           # a GBR of the lights
+    skewed = truth @ bas_relief
+    back = study.decompose_linear(skewed, truth, truth)                      # undone: all of it linear
+    assert back["linear_only"] < 1e-6 and back["rest_only"] == pytest.approx(back["before"], abs=1e-6)
+    assert back["linear"] == pytest.approx(back["moved"], abs=1e-6) and back["before"] > 5
+    nudged = truth + 0.05 * np.random.default_rng(0).normal(size=truth.shape)   # each light on its own
+    nudged /= np.linalg.norm(nudged, axis=1, keepdims=True)
+    one = study.decompose_linear(truth, nudged, truth)
+    assert one["linear"] < 0.5 * one["moved"] and one["rest_only"] > 2 * one["linear_only"]
+    text = study.summary([back, one])
+    assert "the linear alone lowers the error on 1" in text
+    assert "the whole move raises it by more than 1° on 1, by more than 2° on 1" in text
+
+    def write(folder: Path, directions: np.ndarray, intensities: np.ndarray) -> None:
+        folder.mkdir(parents=True)
+        np.savetxt(folder / "lights.txt", np.hstack([directions, np.repeat(intensities[:, None], 3, 1)]))
+        np.savetxt(folder / "lights_gt.txt", truth)
+
+    scales = np.linspace(0.5, 2, len(truth))
+    write(tmp_path / "before" / "ball-woodham", skewed / np.linalg.norm(skewed, axis=1, keepdims=True),
+          np.linalg.norm(skewed, axis=1) * scales)
+    write(tmp_path / "after" / "ball-unps", truth, scales)
+    np.testing.assert_allclose(study.read_scaled_lights(tmp_path / "after" / "ball-unps" / "lights.txt"),
+                               truth * (scales / np.exp(np.log(scales).mean()))[:, None])
+    study.main([str(tmp_path / "before"), str(tmp_path / "after"), "--linear"])
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[0].split() == ["object", "before", "after", "moved", "linear", "linear", "only", "rest",
+                                  "only"]
+    assert printed[1].startswith("ball") and printed[1].split()[5] == "0.00°"   # the linear map alone: exact
+
+
 def test_selfcal_steps_reads_each_mark_off_the_trace_and_counts_raises(capsys):
     study = load_script("lb_selfcal_steps", "experiments/light_benchmark/selfcal_steps.py")
     steady = {"network": 10.0, "start": 8.0, "trace": [[0, 8.0], [100, 7.0], [200, 6.0], [250, 6.0]]}
