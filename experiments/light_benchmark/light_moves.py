@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from unps.inverse.fit import unit
 from unps.lights.contour import best_rotation, rotation_angle
 from unps.metrics import angular_error
 from unps.report.figures import read_light_file
@@ -65,7 +66,6 @@ def decompose_linear(before: np.ndarray, after: np.ndarray, truth: np.ndarray) -
     intensity) split into the common linear map that best carries one onto the other (least
     squares) and the rest, each applied alone, with the mean direction error against ``truth``
     ((n, 3) unit); "linear" is how far the map alone moves the directions (mean, degrees)."""
-    unit = lambda x: x / np.linalg.norm(x, axis=1, keepdims=True)  # noqa: E731
     start, end = unit(before), unit(after)
     linear_map, *_ = np.linalg.lstsq(before, after, rcond=None)         # after ≈ before @ map
     mapped = unit(before @ linear_map)
