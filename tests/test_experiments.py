@@ -596,3 +596,30 @@ def test_light_stage_timing_table_gives_each_stages_median_and_the_last_rounds_l
     assert header.startswith("| subject | light network (s), before → now |")
     assert rule == "|---" * 6 + "|"
     assert row == "| cat | 2.0 → 2.0 | 3.1 → 2.6 | 31.0 → 26.0 | 36.0 → 31.0 | 4.6074 → 4.6084 |"
+
+
+def test_speed_comparison_table_shows_the_named_stages_before_and_now():
+    """experiments/speed/compare.py: one row per subject, the stages asked for between the fit's
+    seconds per step and the normal error."""
+    compare = load_script("speed_compare", "experiments/speed/compare.py")
+
+    def run(wall: float, read_out: float, mae: float) -> dict:
+        return {"wall_s": wall, "fit_s": wall - 10, "s_per_step": 0.1, "normal_mae": mae,
+                "stage_seconds": {"read-out": read_out, "steps": 90.0}}
+
+    header, rule, row = compare.table({"pot1": (run(120.0, 8.04, 6.2213), run(115.5, 3.61, 6.2224))},
+                                      ["read-out"]).splitlines()
+    assert header == ("| subject | wall before → now (s) | fit before → now (s) | s/step before → now "
+                      "| read-out before → now (s) | MAE before → now | Δ MAE (°) |")
+    assert rule == "|---" * 7 + "|"
+    assert row == "| pot1 | 120.0 → 115.5 | 110.0 → 105.5 | 0.100 → 0.100 | 8.04 → 3.61 | 6.221 → 6.222° | +0.001 |"
+
+
+def test_light_stage_timing_refuses_no_rounds_before_it_makes_anything(tmp_path, capsys):
+    """experiments/speed/light_stages.py --rounds 0 stops with the value named, before a worktree
+    or a run folder is made."""
+    light_stages = load_script("light_stages", "experiments/speed/light_stages.py")
+    with pytest.raises(SystemExit):
+        light_stages.main(["--before", "HEAD", "--rounds", "0", "--out", str(tmp_path / "runs")])
+    assert "--rounds must be at least 1, got 0" in capsys.readouterr().err
+    assert not (tmp_path / "runs").exists()

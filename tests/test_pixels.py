@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from unps.inverse.pixels import neighbour_pairs, noise_level, refine_pixel_normals
+from unps.inverse.pixels import neighbour_pairs, noise_level, refine_pixel_normals, scaled_normals
 from unps.metrics import angular_error
 
 
@@ -23,6 +23,20 @@ def stack():
     images = colour * np.clip(normals @ lights.T, 0, None).T[..., None]
     start = unit(normals + 0.14 * unit(np.cross(normals, rng.normal(size=(200, 3)))))
     return images, colour, normals, lights, start
+
+
+def test_each_pixels_weighted_least_squares_is_its_own_solve(stack):
+    """The per-pixel systems, assembled for all pixels at once as matrix products, give what each
+    pixel's own weighted least squares gives (weights of 0 among them: values left out)."""
+    _, _, _, lights, _ = stack
+    rng = np.random.default_rng(5)
+    shading = rng.uniform(-0.1, 1.0, (24, 50)).astype(np.float32)
+    weight = (rng.uniform(0, 2, (24, 50)) * (rng.uniform(size=(24, 50)) > 0.3)).astype(np.float32)
+    solved = scaled_normals(shading, weight, lights.astype(np.float32))
+    for p in range(50):
+        root = np.sqrt(weight[:, p].astype(np.float64))[:, None]
+        own = np.linalg.lstsq(root * lights, root[:, 0] * shading[:, p], rcond=None)[0]
+        np.testing.assert_allclose(solved[p], own, rtol=1e-4, atol=1e-5)
 
 
 def test_a_lambertian_stack_gives_each_pixel_its_true_normal(stack):

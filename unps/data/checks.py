@@ -95,14 +95,17 @@ def clipped_values(images: np.ndarray, mask: np.ndarray) -> np.ndarray:
         array([[1, 1, 1, 1, 1, 1, 1, 1, 0, 0],
                [0, 0, 0, 0, 0, 0, 0, 0, 0, 0]])
     """
-    values = images[:, mask]                                   # (n, m, 3)
     clipped = np.zeros(images.shape[:3], bool)
+    values = images[:, mask]                                   # (n, m, 3)
     if values.size == 0:
         return clipped
-    top = values.max(axis=(0, 1))                              # (3,)
-    at_top = (values >= TOP_LEVEL * top) & (top > 0)
-    plateau = at_top.sum(axis=(0, 1)) >= MIN_CLIPPED_VALUES     # (3,)
-    clipped[:, mask] = (at_top & plateau).any(-1)
+    hit = np.zeros(values.shape[:2], bool)
+    for channel in np.moveaxis(values, -1, 0):                 # channel by channel: reductions over
+        top = channel.max()                                    # the last, 3-long axis are slow
+        at_top = channel >= TOP_LEVEL * top
+        if top > 0 and np.count_nonzero(at_top) >= MIN_CLIPPED_VALUES:
+            hit |= at_top
+    clipped[:, mask] = hit
     return clipped
 
 
@@ -170,7 +173,7 @@ def value_levels(images: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.n
     if float(values.max()) <= 0:
         return np.zeros(len(images)), np.ones(len(images))
     clipped = clipped_values(images, mask)[:, mask].mean(1)
-    black = (values <= 0).all(-1).mean(1)
+    black = ((values[..., 0] <= 0) & (values[..., 1] <= 0) & (values[..., 2] <= 0)).mean(1)
     return clipped, black
 
 
