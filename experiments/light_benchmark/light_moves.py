@@ -84,9 +84,6 @@ def header(common: str = "turn") -> str:
             f"{'rest only':>11}")
 
 
-HEADER = header()
-
-
 def line(name: str, row: dict[str, float]) -> str:
     common = "turn" if "turn" in row else "linear"
     return (f"{name:<14}{row['before']:>8.2f}°{row['after']:>8.2f}°{row['moved']:>7.2f}°"
@@ -165,7 +162,7 @@ def selfcal_moves(args) -> None:
 
     rows = runs.summaries(benchmark.study_cases(args), out, run, lambda row: row,
                                     progress, args.report)
-    print(f"\n{'':<10}{'set':>4} {HEADER}")
+    print(f"\n{'':<10}{'set':>4} {header()}")
     print("\n".join(progress(case, row, None) for case, row in rows.items()))
     for group, label, group_rows in runs.by_light_set(rows):
         print(f"\n{group} {label}\n{summary(group_rows)}")
