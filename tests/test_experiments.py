@@ -535,6 +535,26 @@ def test_selfcal_steps_reads_each_mark_off_the_trace_and_counts_raises(capsys):
     assert "--marks [250, 400]: each must be a multiple of 100 up to --steps (300)" in capsys.readouterr().err
 
 
+def test_selfcal_steps_stops_each_trace_where_its_lights_settle():
+    study = load_script("lb_selfcal_steps", "experiments/light_benchmark/selfcal_steps.py")
+
+    def turned(degrees):                       # two lights, both turned about y by ``degrees``
+        t = np.radians(degrees)
+        return [[np.sin(t), 0.0, np.cos(t)], [np.sin(t + 0.5), 0.0, np.cos(t + 0.5)]]
+
+    settling = {"network": 6.0, "start": 5.0, "trace": [[0, 5.0], [100, 4.0], [200, 3.5], [300, 3.4]],
+                "directions": [turned(0), turned(5), turned(5.5), turned(5.51)]}
+    moving = {"network": 6.0, "start": 5.0, "trace": [[0, 5.0], [100, 4.0], [200, 6.5], [300, 7.0]],
+              "directions": [turned(0), turned(5), turned(10), turned(10.01)]}
+    assert study.settled_step(settling, 1.0) == 200        # 0.5° from step 100 to 200
+    assert study.settled_step(settling, 0.1) == 300        # the last read: the fit ends there anyway
+    assert study.settled_step(moving, 1.0) == 300
+    lines = study.settled_summary(["settling", "moving"], [settling, moving], [1.0, 0.1]).splitlines()
+    assert lines[0].split()[:6] == ["settle", "1°:", "5.25°", "ratio", "0.875", "steps"]
+    assert "steps    250" in lines[0] and "raised >1°:  1" in lines[0] and "worst +2.00° (moving)" in lines[0]
+    assert "0 above, 0 below, worst +0.10°" in lines[0] and "steps    300" in lines[1]
+
+
 def test_grid_floor_names_a_missing_diligent_folder(tmp_path, capsys):
     """--diligent points the grid-floor study at DiLiGenT; a folder that is not there is named."""
     grid_floor = load_script("grid_floor", "experiments/calibrated/grid_floor.py")

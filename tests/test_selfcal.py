@@ -239,6 +239,20 @@ def test_an_observer_sees_the_lights_every_hundred_steps_and_the_ones_returned_l
     assert angular_error(seen[1][1], start.directions).mean() > 0.1          # it watched the lights move
 
 
+def test_a_fit_whose_lights_settle_stops_where_that_many_steps_would_end(glossy):
+    start = rotated(glossy, 10)
+    settled, verdict = self_calibrate(glossy, start, SelfCalibration(steps=300, max_pixels=600, settle_deg=90))
+    short, _ = self_calibrate(glossy, start, SelfCalibration(steps=100, max_pixels=600))
+    assert verdict.evidence["steps"] == 100                  # no light moves 90° in 100 steps
+    assert verdict.reason.startswith("fitted to the images, settled after 100 steps")
+    np.testing.assert_array_equal(settled.directions, short.directions)
+    np.testing.assert_array_equal(settled.intensities, short.intensities)
+    _, unsettled = self_calibrate(glossy, start, SelfCalibration(steps=300, max_pixels=600, settle_deg=1e-6))
+    assert unsettled.evidence["steps"] == 300 and unsettled.reason.startswith("fitted to the images in 300 steps")
+    with pytest.raises(InputError, match="light.selfcal.settle_deg must be a number of degrees >= 0"):
+        self_calibrate(glossy, start, SelfCalibration(settle_deg=-1))
+
+
 def test_self_calibration_keeps_its_first_guess_when_the_fit_diverges(glossy, caplog, monkeypatch):
     import unps.lights.selfcal as selfcal
 

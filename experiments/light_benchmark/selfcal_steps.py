@@ -3,6 +3,7 @@
     python experiments/light_benchmark/selfcal_steps.py               # every case, 1500 steps (~50 min)
     python experiments/light_benchmark/selfcal_steps.py --only benchmark --sets 12
     python experiments/light_benchmark/selfcal_steps.py --report --marks 500 1000 1500
+    python experiments/light_benchmark/selfcal_steps.py --steps 1000 --report --settle 0.02 0.05 0.1
 
 Each case (``benchmark.py``'s) is estimated by the network and the reversal test, then
 self-calibrated with the default settings for ``--steps`` steps, the direction error of its lights
@@ -14,7 +15,9 @@ steps do not depend on how many there will be (a constant learning rate, the sha
 Printed per group and light set, at each of ``--marks``: the mean direction error, its ratio to the
 network's, the cases the self-calibration up to that step left more than 1° and 2° above where it
 started (after the reversal test) with the worst, and the cases more than 0.3° above and below
-the last step's error.
+the last step's error. With ``--settle``, the same for ``light.selfcal.settle_deg`` at each value
+given (each case stopped at the first read where its lights moved no more than that on average
+since the one before, as the fit itself stops), with the mean steps taken.
 """
 
 from __future__ import annotations
@@ -38,21 +41,56 @@ NOTABLE = 0.3   # degrees from the last step's error
 
 def trace_case(subject, network, settings) -> dict:
     """The lights' direction error from the network, after the reversal test, and every 100
-    steps of the self-calibration (``[[step, error], …]``)."""
+    steps of the self-calibration (``trace``: ``[[step, error], …]``), with the (n, 3) directions
+    at each of those steps (``directions``, in the trace's order)."""
     start = network(subject)
     truth = subject.light_directions.astype(np.float64)
-    trace = []
-    self_calibrate(subject, start, settings,
-                   observe=lambda step, directions: trace.append(
-                       [step, float(angular_error(directions, truth).mean())]))
+    trace, seen = [], []
+
+    def observe(step, directions):
+        trace.append([step, float(angular_error(directions, truth).mean())])
+        seen.append(np.round(directions, 7).tolist())
+
+    self_calibrate(subject, start, settings, observe=observe)
     return {"network": start.verdicts[0].errors["light_dir_mae"],
             "start": float(angular_error(start.directions.astype(np.float64), truth).mean()),
-            "trace": trace}
+            "trace": trace, "directions": seen}
 
 
 def error_at(case: dict, step: int) -> float:
     """The case's error read at ``step`` (a multiple of 100, or its last step)."""
     return dict((int(s), e) for s, e in case["trace"])[step]
+
+
+def settled_step(case: dict, settle_deg: float) -> int:
+    """The step at which ``light.selfcal.settle_deg=settle_deg`` stops the case's fit: the first
+    read, short of the last step, where the lights have moved no more than ``settle_deg`` on
+    average since the read before (the trace's directions); its last step where none is."""
+    steps = [int(step) for step, _ in case["trace"]]
+    directions = [np.asarray(d) for d in case["directions"]]
+    for k in range(1, len(steps) - 1):
+        if angular_error(directions[k], directions[k - 1]).mean() <= settle_deg:
+            return steps[k]
+    return steps[-1]
+
+
+def settled_summary(names: list[str], cases: list[dict], settle: list[float]) -> str:
+    """One line per ``settle`` value for the cases of one light set, as :func:`summary`'s, with
+    each case read where that value stops it (:func:`settled_step`) and the mean steps taken."""
+    last = np.array([c["trace"][-1][1] for c in cases])
+    network = np.mean([c["network"] for c in cases])
+    lines = []
+    for value in settle:
+        stops = [settled_step(c, value) for c in cases]
+        at = np.array([error_at(c, stop) for c, stop in zip(cases, stops)])
+        raised = at - np.array([c["start"] for c in cases])
+        worst, off = int(np.argmax(raised)), at - last
+        lines.append(f"  settle {value:>5g}°: {at.mean():6.2f}°  ratio {at.mean() / network:.3f}  "
+                     f"steps {np.mean(stops):6.0f}  raised >1°: {int((raised > 1).sum()):>2}  "
+                     f">2°: {int((raised > 2).sum()):>2}  worst {raised[worst]:+.2f}° ({names[worst]})  "
+                     f"vs the last step: {int((off > NOTABLE).sum())} above, "
+                     f"{int((off < -NOTABLE).sum())} below, worst {off.max():+.2f}°")
+    return "\n".join(lines)
 
 
 def summary(names: list[str], cases: list[dict], marks) -> str:
@@ -79,18 +117,20 @@ def main(argv=None) -> None:
     parser.add_argument("--steps", type=int, default=1500, help="self-calibration steps (default 1500)")
     parser.add_argument("--marks", type=int, nargs="+", default=list(MARKS),
                         help="steps to report (multiples of 100, or --steps)")
+    parser.add_argument("--settle", type=float, nargs="*", default=[],
+                        help="light.selfcal.settle_deg values to read off the traces")
     args = parser.parse_args(argv)
     bad = [m for m in args.marks if m > args.steps or (m % 100 and m != args.steps)]
     if bad:
         parser.error(f"--marks {bad}: each must be a multiple of 100 up to --steps ({args.steps}), "
                      "or --steps")
     out = args.out or args.cache / "results" / f"selfcal_steps-{args.steps}"
-    runs.claim(out, {"steps": args.steps, "scenes": scenes.SCENE_VERSION})
+    runs.claim(out, {"steps": args.steps, "scenes": scenes.SCENE_VERSION, "directions": True})
     print(f"network → reversal test → self-calibration, default settings but {args.steps} steps; the "
           f"lights' mean direction error at steps {', '.join(map(str, args.marks))}; results in {out}")
     network, _ = benchmark.light_source(["reversal"], [])
-    settings = benchmark.instantiate_node(
-        ["fit"], ["light=selfcal", f"light.selfcal.steps={args.steps}"], "light.selfcal")()
+    every_step = ["light=selfcal", f"light.selfcal.steps={args.steps}", "light.selfcal.settle_deg=0"]
+    settings = benchmark.instantiate_node(["fit"], every_step, "light.selfcal")()
 
     def progress(case, result, _) -> str:
         group, name, label = case
@@ -107,6 +147,8 @@ def main(argv=None) -> None:
         network_mean = np.mean([c["network"] for c in cases])
         print(f"\n{group} {label} ({len(cases)} cases; network {network_mean:.2f}°)")
         print(summary(names, cases, args.marks))
+        if args.settle:
+            print(settled_summary(names, cases, args.settle))
 
 
 if __name__ == "__main__":

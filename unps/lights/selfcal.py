@@ -58,7 +58,10 @@ class SelfCalibration:
     """Settings of the self-calibration fit.
 
     Attributes:
-        steps: Adam steps of the fit.
+        steps: Adam steps of the fit at most.
+        settle_deg: stop before ``steps`` once the lights' directions have moved no more than
+            this (degrees, on average over the lights) in the last :data:`CHECK_EVERY` steps; 0:
+            always run every step.
         max_pixels: object pixels on the working grid at most (blocks are averaged).
         levels: scales of the depth pyramid.
         sharpness: the specular lobes' κ (spherical Gaussians on n·h).
@@ -98,6 +101,7 @@ class SelfCalibration:
     """
 
     steps: int = 1000
+    settle_deg: float = 0.05
     max_pixels: int = 4000
     levels: int = 4
     sharpness: tuple[float, ...] = (10.0, 30.0, 100.0, 300.0)
@@ -141,6 +145,9 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
         intensities times one fitted scale per image; geometric mean of the scales 1), or
         ``lights`` itself when the fit diverges; and the verdict.
     """
+    if not settings.settle_deg >= 0:
+        raise InputError(f"light.selfcal.settle_deg must be a number of degrees >= 0 (0: run every "
+                         f"step), got {settings.settle_deg}")
     if settings.shadows_every < 0 or int(settings.shadows_every) != settings.shadows_every:
         raise InputError(f"light.selfcal.shadows_every must be a whole number of steps >= 0 (0: no "
                          f"cast shadows), got {settings.shadows_every}")
@@ -166,20 +173,21 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
     prior = network_prior(lights, settings.prior_weight, settings.prior_floor_deg,
                           settings.prior_intensity)
     weight = lit_share(subject, settings.max_pixels) if settings.skip_black else None
-    loss, pull = fit(model, target.to(device), settings, None if prior is None else prior.to(device),
+    loss, pull, steps = fit(model, target.to(device), settings, None if prior is None else prior.to(device),
                      None if weight is None else weight.to(device),
                      None if ceiling is None else ceiling.to(device), observe)
     directions, scales = (t.detach().cpu().numpy().astype(np.float64) for t in model.lights())
     if not (np.isfinite(loss) and np.all(np.isfinite(directions))):
         log.warning("self-calibration of %s diverged; keeping the first guess", subject.name)
-        return lights, Verdict(settings.name, "declined", "the fit diverged", {"loss": loss})
+        return lights, Verdict(settings.name, "declined", "the fit diverged",
+                               {"loss": loss, "steps": steps})
     moved = float(angular_error(directions, lights.directions).mean())
-    evidence = {"loss": loss, "prior": pull, "moved_deg": moved}
+    evidence = {"loss": loss, "prior": pull, "moved_deg": moved, "steps": steps}
     if weight is not None:
         evidence["black_share"] = float(1 - weight.mean())
-    log.info("self-calibrated %d lights on %d pixels in %.1f s: loss %.4g, pull toward the first "
-             "guess %.4g; directions moved %.2f° on average", subject.n_images,
-             int(grid.mask.sum()), time.perf_counter() - start, loss, pull, moved)
+    log.info("self-calibrated %d lights on %d pixels in %d steps (%.1f s): loss %.4g, pull toward "
+             "the first guess %.4g; directions moved %.2f° on average", subject.n_images,
+             int(grid.mask.sum()), steps, time.perf_counter() - start, loss, pull, moved)
     if moved > MOVED_WARNING:
         log.warning("self-calibration moved the lights %.1f° on average from the light network's "
                     "estimate: the images and the network disagree, and either may be wrong; check "
@@ -189,9 +197,10 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
     intensities = intensities / np.exp(np.log(intensities.mean(1)).mean())
     fitted = Lights(directions.astype(np.float32), intensities.astype(np.float32), "selfcal",
                     spread_deg=lights.spread_deg)
-    return fitted, Verdict(settings.name, "changed", f"fitted to the images (loss {loss:.4g}, pull "
-                           f"toward the first guess {pull:.4g}); directions moved {moved:.2f}° on "
-                           f"average", evidence)
+    how = f", settled after {steps} steps" if steps < settings.steps else f" in {steps} steps"
+    return fitted, Verdict(settings.name, "changed", f"fitted to the images{how} (loss {loss:.4g}, "
+                           f"pull toward the first guess {pull:.4g}); directions moved {moved:.2f}° "
+                           f"on average", evidence)
 
 
 def working_grid(observed: Subject, scaled_normals: np.ndarray, max_pixels: int) -> Subject:
@@ -287,12 +296,15 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
     steps, the pixels weighted by ``weight`` (m,) and the black values held only to ``ceiling``
     (n, 3) where given (:func:`objective`); stops early on a non-finite loss, read every
     :data:`CHECK_EVERY` steps (a loss that is not finite leaves the parameters so, and the final
-    loss with them). ``observe(step, directions)``, where given, sees the lights' (n, 3) unit
-    directions before every :data:`CHECK_EVERY`-th step and after the last.
+    loss with them), and once the lights have settled: their directions moved no more than
+    ``settings.settle_deg`` on average since the last read. No step depends on how many there will be, so a
+    fit that settles at step S ends where ``steps=S`` would. ``observe(step, directions)``, where
+    given, sees the lights' (n, 3) unit directions before every :data:`CHECK_EVERY`-th step and
+    after the last.
 
     Returns:
         The objective and the prior's pull at the end, with the shadows of the final depth and
-        lights.
+        lights, and the steps taken.
     """
     every = settings.shadows_every
     visible = None
@@ -309,24 +321,32 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
         pull = prior.cost(*model.lights()) if prior is not None else torch.zeros((), device=target.device)
         return objective(model, target, settings, visible, weight, ceiling) + pull, pull
 
-    for step in range(settings.steps):
+    read = None
+    step = 0
+    while step < settings.steps:
+        if step % CHECK_EVERY == 0 and (observe is not None or settings.settle_deg):
+            last, read = read, directions_of(model)
+            if last is not None and settings.settle_deg and \
+                    angular_error(read, last).mean() <= settings.settle_deg:
+                break
         if every and step % every == 0:
             visible = model.visibility()
         loss, _ = total(visible)
         if step % CHECK_EVERY == 0 and not torch.isfinite(loss):
-            return loss.item(), float("nan")
+            return loss.item(), float("nan"), step
         if observe is not None and step % CHECK_EVERY == 0:
-            observe(step, directions_of(model))
+            observe(step, read)
         if step % settings.log_every == 0:
             log.info("self-calibration step %d/%d: loss %.4g", step, settings.steps, loss.item())
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
+        step += 1
     if observe is not None:
-        observe(settings.steps, directions_of(model))
+        observe(step, directions_of(model))
     with torch.no_grad():
         loss, pull = total(model.visibility() if every else None)
-        return loss.item(), pull.item()
+        return loss.item(), pull.item(), step
 
 
 def directions_of(model: SelfCalibrationModel) -> np.ndarray:
