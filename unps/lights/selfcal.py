@@ -290,17 +290,17 @@ def objective(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfC
 def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibration,
         prior: NetworkPrior | None = None, weight: torch.Tensor | None = None,
         ceiling: torch.Tensor | None = None,
-        observe: Callable[[int, np.ndarray], None] | None = None) -> tuple[float, float]:
+        observe: Callable[[int, np.ndarray], None] | None = None) -> tuple[float, float, int]:
     """Adam on every unknown of the model (the shared frame held where ``settings.hold_frame``)
     for ``settings.steps`` steps, the cast shadows marched again every ``settings.shadows_every``
     steps, the pixels weighted by ``weight`` (m,) and the black values held only to ``ceiling``
     (n, 3) where given (:func:`objective`); stops early on a non-finite loss, read every
     :data:`CHECK_EVERY` steps (a loss that is not finite leaves the parameters so, and the final
     loss with them), and once the lights have settled: their directions moved no more than
-    ``settings.settle_deg`` on average since the last read. No step depends on how many there will be, so a
-    fit that settles at step S ends where ``steps=S`` would. ``observe(step, directions)``, where
-    given, sees the lights' (n, 3) unit directions before every :data:`CHECK_EVERY`-th step and
-    after the last.
+    ``settings.settle_deg`` on average since the last read. No step depends on how many there
+    will be, so a fit that settles at step S ends where ``steps=S`` would.
+    ``observe(step, directions)``, where given, sees the lights' (n, 3) unit directions before
+    every :data:`CHECK_EVERY`-th step and after the last.
 
     Returns:
         The objective and the prior's pull at the end, with the shadows of the final depth and
