@@ -164,7 +164,7 @@ def test_pixels_black_in_every_image_weigh_nothing_in_the_loss():
 
 
 def test_black_values_hold_the_rendering_only_below_the_first_level():
-    from unps.lights.selfcal import black_ceiling, initial_model, objective, working_grid
+    from unps.lights.selfcal import BlackValues, black_ceiling, initial_model, objective, working_grid
 
     sphere = eight_bit(glossy_sphere(), black_columns=16)
     settings = SelfCalibration(steps=30, max_pixels=600, censor_black=True, prior_weight=0.0)
@@ -175,16 +175,33 @@ def test_black_values_hold_the_rendering_only_below_the_first_level():
     assert black.any() and (~black).any()
     rendered = model(None).detach()
     pulls = objective(model, target, settings) - (rendered - target).abs().mean()
+
+    def held_to(ceiling):
+        return objective(model, target, settings, black=BlackValues.of(target, ceiling))
+
     above_all = torch.full((sphere.n_images, 3), float(rendered.max()) + 1)
     only_lit = torch.where(black, 0.0, (rendered - target).abs()).mean() + pulls
-    torch.testing.assert_close(objective(model, target, settings, ceiling=above_all), only_lit)
+    torch.testing.assert_close(held_to(above_all), only_lit)
     at_zero = torch.zeros(sphere.n_images, 3)                    # a ceiling of 0: the plain L1 loss
-    torch.testing.assert_close(objective(model, target, settings, ceiling=at_zero),
-                               objective(model, target, settings))
-    halfway = torch.full((sphere.n_images, 3), float(rendered[black].median()))
-    charged = torch.where(black, (rendered - halfway).clamp_min(0), (rendered - target).abs()).mean() + pulls
-    torch.testing.assert_close(objective(model, target, settings, ceiling=halfway), charged)
+    torch.testing.assert_close(held_to(at_zero), objective(model, target, settings))
+    ceilings = torch.linspace(0.5, 1.5, sphere.n_images)[:, None] * rendered[black].median()
+    ceilings = ceilings * torch.tensor([0.8, 1.0, 1.2])           # one per image and channel
+    charged = torch.where(black, (rendered - ceilings).clamp_min(0), (rendered - target).abs())
+    torch.testing.assert_close(held_to(ceilings), charged.mean() + pulls)
+    weight = torch.linspace(0.2, 1.0, len(target))                # each pixel weighted, as skip_black does
+    weighted = (charged * (weight / weight.mean())[:, None, None]).mean() + pulls
+    torch.testing.assert_close(objective(model, target, settings, None, weight,
+                                         BlackValues.of(target, ceilings)), weighted)
 
+    def clamped():                               # the same loss with the censoring as a clamp
+        live = model(None)
+        error = torch.where(black, (live - ceilings).clamp_min(0), (live - target).abs())
+        return objective(model, target, settings) - (live - target).abs().mean() + error.mean()
+
+    parameters = list(model.parameters())
+    for found, expected in zip(torch.autograd.grad(held_to(ceilings), parameters, allow_unused=True),
+                               torch.autograd.grad(clamped(), parameters, allow_unused=True)):
+        torch.testing.assert_close(found, expected)
     white, captured = 0.5, sphere.replace(light_intensities=None)      # levels as the camera stored them
     guess = Lights(sphere.light_directions, sphere.light_intensities, "guess")
     ceiling = black_ceiling(captured, guess, white)

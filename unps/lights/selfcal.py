@@ -268,21 +268,51 @@ def initial_model(grid: Subject, target: torch.Tensor, scaled_lights: np.ndarray
                                 uniform, tuple(settings.sharpness), settings.levels)
 
 
+@dataclass(frozen=True)
+class BlackValues:
+    """The values of a (m, n, 3) target that are 0, and what each stands for at most.
+
+    Attributes:
+        index: (k,) their positions in the flattened target.
+        ceiling: (k,) the ceiling at each (:func:`black_ceiling`'s for its image and channel).
+    """
+
+    index: torch.Tensor
+    ceiling: torch.Tensor
+
+    @classmethod
+    def of(cls, target: torch.Tensor, ceiling: torch.Tensor) -> BlackValues:
+        """The black values of ``target`` (m, n, 3) under the (n, 3) ``ceiling``."""
+        index = (target == 0).flatten().nonzero()[:, 0]
+        return cls(index, ceiling.expand_as(target).flatten()[index])
+
+
 def objective(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibration,
               visible: torch.Tensor | None = None, weight: torch.Tensor | None = None,
-              ceiling: torch.Tensor | None = None) -> torch.Tensor:
+              black: BlackValues | None = None) -> torch.Tensor:
     """Mean absolute image error (cast shadows where ``visible`` (m, n) is 0; each pixel weighted
-    by ``weight`` (m,) where given; where the target is 0 and ``ceiling`` (n, 3) is given, only
-    what the rendering puts above the ceiling) plus the pulls on the per-light residuals and the
-    bas-relief."""
+    by ``weight`` (m,) where given; at the target's ``black`` values, where given, only what the
+    rendering puts above their ceiling) plus the pulls on the per-light residuals and the
+    bas-relief.
+
+    At a black value the error |r − 0| − min(r, ceiling) = max(r − ceiling, 0), the rendering r
+    being ≥ 0: the censoring costs a pass over the black values alone, and its gradient is the
+    clamp's, value for value (1 at r = ceiling too).
+    """
     mu, nu, lam = model.gbr
     rendered = model(visible)
     error = (rendered - target).abs()
-    if ceiling is not None:
-        error = torch.where(target == 0, (rendered - ceiling).clamp_min(0), error)
-    if weight is not None:
-        error = error * (weight / weight.mean())[:, None, None]
-    return (error.mean()
+    scale = None if weight is None else weight / weight.mean()
+    if scale is not None:
+        error = error * scale[:, None, None]
+    total = error.sum()
+    if black is not None:
+        at = rendered.flatten()[black.index]
+        held = torch.where(at < black.ceiling, at, black.ceiling)     # min; slope 0 at a tie
+        if scale is not None:
+            held = held * scale[black.index // (rendered.shape[1] * rendered.shape[2])]
+        total = total - held.sum()
+    return (total / rendered.numel()
             + settings.residual_weight * model.light_residual.pow(2).sum(1).mean()
             + settings.gbr_weight * (mu ** 2 + nu ** 2 + (lam - 1) ** 2))
 
@@ -317,9 +347,11 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
         dict(params=surface_parameters, lr=settings.lr),
         dict(params=light_parameters, lr=settings.lr_lights)])
 
+    black = None if ceiling is None else BlackValues.of(target, ceiling)
+
     def total(visible: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
         pull = prior.cost(*model.lights()) if prior is not None else torch.zeros((), device=target.device)
-        return objective(model, target, settings, visible, weight, ceiling) + pull, pull
+        return objective(model, target, settings, visible, weight, black) + pull, pull
 
     read = None
     step = 0
