@@ -173,9 +173,10 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
     prior = network_prior(lights, settings.prior_weight, settings.prior_floor_deg,
                           settings.prior_intensity)
     weight = lit_share(subject, settings.max_pixels) if settings.skip_black else None
-    loss, pull, steps = fit(model, target.to(device), settings, None if prior is None else prior.to(device),
-                     None if weight is None else weight.to(device),
-                     None if ceiling is None else ceiling.to(device), observe)
+    loss, pull, steps = fit(model, target.to(device), settings,
+                            None if prior is None else prior.to(device),
+                            None if weight is None else weight.to(device),
+                            None if ceiling is None else ceiling.to(device), observe)
     directions, scales = (t.detach().cpu().numpy().astype(np.float64) for t in model.lights())
     if not (np.isfinite(loss) and np.all(np.isfinite(directions))):
         log.warning("self-calibration of %s diverged; keeping the first guess", subject.name)
@@ -353,20 +354,20 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
         pull = prior.cost(*model.lights()) if prior is not None else torch.zeros((), device=target.device)
         return objective(model, target, settings, visible, weight, black) + pull, pull
 
-    read = None
-    step = 0
+    read, step = None, 0
     while step < settings.steps:
-        if step % CHECK_EVERY == 0 and (observe is not None or settings.settle_deg):
+        checking = step % CHECK_EVERY == 0
+        if checking:
             last, read = read, directions_of(model)
-            if last is not None and settings.settle_deg and \
+            if settings.settle_deg and last is not None and \
                     angular_error(read, last).mean() <= settings.settle_deg:
                 break
         if every and step % every == 0:
             visible = model.visibility()
         loss, _ = total(visible)
-        if step % CHECK_EVERY == 0 and not torch.isfinite(loss):
+        if checking and not torch.isfinite(loss):
             return loss.item(), float("nan"), step
-        if observe is not None and step % CHECK_EVERY == 0:
+        if checking and observe is not None:
             observe(step, read)
         if step % settings.log_every == 0:
             log.info("self-calibration step %d/%d: loss %.4g", step, settings.steps, loss.item())
