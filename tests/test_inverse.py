@@ -454,28 +454,43 @@ def test_twenty_steps_on_a_tiny_sphere_lower_the_loss_and_the_error():
     assert mae1 < 0.5 * mae0           # measured: 72° → 22°
 
 
-def test_the_networks_precision_is_bfloat16_on_a_gpu_only_unless_chosen():
+def test_the_networks_precision_is_bfloat16_where_the_hardware_has_it_unless_chosen(monkeypatch):
     auto, chosen = Preset.from_config(), Preset.from_config(precision="bf16-mixed")
     assert auto.precision == "auto"
-    assert auto.network_precision(torch.device("cpu")) == "32-true"
+    for amx, precision in ((False, "32-true"), (True, "bf16-mixed")):
+        monkeypatch.setattr(torch.cpu, "_is_amx_tile_supported", lambda amx=amx: amx)
+        assert auto.network_precision(torch.device("cpu")) == precision
+        assert Preset.from_config(precision="32-true").network_precision(torch.device("cpu")) == "32-true"
+    monkeypatch.setattr(torch.cpu, "_is_amx_tile_supported", lambda: False)
     assert auto.network_precision(torch.device("cuda", 1)) == "bf16-mixed"
     assert chosen.network_precision(torch.device("cpu")) == "bf16-mixed"
     assert Preset.from_config(precision="32-true").network_precision(torch.device("cuda")) == "32-true"
+    with initialize_config_module(config_module="unps.conf", version_base="1.3"):
+        for preset in ("fast", "paper"):
+            assert compose("fit", overrides=[f"preset={preset}"]).preset.precision == "auto"
 
 
 def test_bf16_on_a_cpu_warns_only_where_the_cpu_lacks_bfloat16_hardware(sphere, caplog, monkeypatch):
     """A CPU with AMX runs bfloat16 convolutions faster than float32 (experiments/speed): the fit
     says so; one without is warned that they may run several times slower."""
-    preset = Preset.from_config(**TINY, precision="bf16-mixed")
-    for amx, said in ((True, "on a CPU with AMX"), (False, "no bfloat16 hardware")):
+    for precision, amx, said in (("bf16-mixed", True, "on a CPU with AMX"), ("auto", True, "on a CPU with AMX"),
+                                 ("bf16-mixed", False, "no bfloat16 hardware")):
+        preset = Preset.from_config(**TINY, precision=precision)
         monkeypatch.setattr(torch.cpu, "_is_amx_tile_supported", lambda amx=amx: amx)
         assert native_bfloat16(torch.device("cpu")) is amx
         caplog.clear()
         with caplog.at_level(logging.INFO):
-            build_system(sphere, sphere.light_directions, preset, InterreflectionModel(enabled=False), False, "")
-        [record] = [r for r in caplog.records if "preset.precision=bf16-mixed" in r.getMessage()]
+            system, _ = build_system(sphere, sphere.light_directions, preset, InterreflectionModel(enabled=False),
+                                     False, "")
+        assert system.networks_in_bf16
+        [record] = [r for r in caplog.records if f"preset.precision={precision}" in r.getMessage()]
         assert said in record.getMessage()
         assert record.levelno == (logging.INFO if amx else logging.WARNING)
+    caplog.clear()
+    with caplog.at_level(logging.INFO):      # auto without AMX: float32, nothing to say
+        system, _ = build_system(sphere, sphere.light_directions, Preset.from_config(**TINY),
+                                 InterreflectionModel(enabled=False), False, "")
+    assert not system.networks_in_bf16 and "preset.precision" not in caplog.text
     assert native_bfloat16(torch.device("cuda"))
 
 
@@ -532,6 +547,7 @@ def test_fit_writes_the_unps_outputs(tmp_path):
         assert (tmp_path / name).exists(), name
     saved = json.loads((tmp_path / "metrics.json").read_text())
     assert saved["method"] == "unps" and saved["fit_steps"] == 20 and saved["facets"] > 0
+    assert saved["network_precision"] == ("bf16-mixed" if native_bfloat16(torch.device("cpu")) else "32-true")
     assert np.load(tmp_path / "reflectance.npy").shape == (12, *saved["fit_resolution"], 3)
     assert metrics["normal_mae"] < 30
 
@@ -775,7 +791,7 @@ def test_clipped_values_are_left_out_of_the_loss():
 
     def loss(s):
         torch.manual_seed(3)
-        with torch.no_grad(), pytest.warns(UserWarning, match="self.log"):
+        with torch.no_grad():               # step 0 logs nothing (figures_read), so needs no trainer
             return s.training_step(None, 0).item()
 
     assert loss(all_marked) == loss(system)
@@ -794,6 +810,39 @@ def test_clipped_values_are_found_on_the_working_grid():
     usable = unclipped(clipped_values(cropped.observed_images(), cropped.mask), cropped.mask, 2)
     assert usable is not None and 0 < (usable == 0).mean() < 0.5
     assert unclipped(clipped_values(plain.observed_images(), plain.mask), plain.mask, 1) is None
+
+
+def scalars(run) -> dict[str, list[tuple[int, float]]]:
+    """Every scalar a fit wrote to TensorBoard: tag → [(step, value)]."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    events = EventAccumulator(str(run / "tensorboard")).Reload()
+    return {tag: [(e.step, e.value) for e in events.Scalars(tag)] for tag in events.Tags()["scalars"]}
+
+
+def test_logging_only_the_steps_whose_figures_are_read_writes_what_logging_every_step_did(
+        tmp_path, monkeypatch, caplog):
+    """update_every=15 is no multiple of the logger's 10 steps: the progress lines at 15 and 30
+    and the last step's must carry their own step's figures too."""
+    overrides = [*tiny_overrides(steps=33, every=15), "light=refine", "preset.prior_steps=12"]
+    with caplog.at_level(logging.INFO, logger="unps.inverse.fit"):
+        fit(config(tmp_path / "read", *overrides))
+    lines_read = [r.getMessage().split(" (")[0] for r in caplog.records if r.getMessage().startswith("step ")]
+    caplog.clear()
+    monkeypatch.setattr(InverseRendering, "figures_read", lambda self: True)
+    with caplog.at_level(logging.INFO, logger="unps.inverse.fit"):
+        fit(config(tmp_path / "every", *overrides))
+    lines_every = [r.getMessage().split(" (")[0] for r in caplog.records if r.getMessage().startswith("step ")]
+    read, every = scalars(tmp_path / "read"), scalars(tmp_path / "every")
+    for tag in ("loss/reconstruction", "mae", "light/offset_deg"):
+        assert read[tag] == every[tag], tag
+        assert [step for step, _ in every[tag]] == [9, 19, 29]
+    # the prior pulls for 12 steps, so step 9 is its one figure written; later writes repeat
+    # whichever figure Lightning last saw (step 9's here, step 11's when every step logs)
+    assert read["loss/prior"][0] == every["loss/prior"][0] and read["loss/prior"][0][0] == 9
+    assert lines_read == lines_every and [line.split(":")[0] for line in lines_every] == [
+        "step 15/33", "step 30/33", "step 33/33"]
+    assert all("normal error" in line for line in lines_every)
 
 
 def test_a_fit_that_stops_moving_says_so_and_a_healthy_one_does_not(tmp_path):

@@ -75,9 +75,9 @@ def train(system: InverseRendering, schedule: Schedule, output_dir: str | Path |
             callbacks=[ModelCheckpoint(dirpath=out / "checkpoints", save_last=True, save_top_k=0,
                                        every_n_train_steps=schedule.update_every),
                        FitPictures(every=schedule.update_every), progress, watch])
-    trainer = L.Trainer(max_steps=schedule.steps, **trainer_placement(device), log_every_n_steps=10,
-                        enable_model_summary=False, enable_progress_bar=False, num_sanity_val_steps=0,
-                        **options)
+    trainer = L.Trainer(max_steps=schedule.steps, **trainer_placement(device),
+                        log_every_n_steps=system.log_every, enable_model_summary=False,
+                        enable_progress_bar=False, num_sanity_val_steps=0, **options)
     start = time.perf_counter()
     try:
         with warnings.catch_warnings():

@@ -99,7 +99,8 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
                  "toward the initialisation after the prior (preset.dark_hold=%g)",
                  100 * dark_share, 100 * DARK_SHARE, schedule.dark_hold)
     parameters = sum(p.numel() for p in system.parameters() if p.requires_grad)
-    log.info("networks: %.2f M parameters; %d steps", parameters / 1e6, schedule.steps)
+    precision = "bf16-mixed" if system.networks_in_bf16 else "32-true"
+    log.info("networks: %.2f M parameters, %s; %d steps", parameters / 1e6, precision, schedule.steps)
 
     with stage("steps"):
         seconds, resumed_from = train(system, schedule, output_dir, subject.name, device)
@@ -150,7 +151,8 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
                  bend["mean"], bend["max"])
     info = {"fit_resolution": [h, w], "fit_downsample": factor, "fit_steps": schedule.steps,
             "fit_s_per_step": seconds / max(steps_run, 1), "resumed_from_step": resumed_from,
-            "parameters": parameters, "facets": solver.n_facets if solver else 0, "preset": preset.name,
+            "parameters": parameters, "network_precision": precision,
+            "facets": solver.n_facets if solver else 0, "preset": preset.name,
             "interreflection": interreflection.enabled,
             "facet_downsample": solver.factor if solver else None,
             "interreflection_bend_deg": bend["mean"] if bend else None, "moved_from_start_deg": moved,
@@ -315,8 +317,8 @@ def build_system(work: Subject, light_directions: np.ndarray, preset: Preset,
     precision = preset.network_precision(device)
     if precision == "bf16-mixed" and device.type != "cuda":
         if native_bfloat16(device):
-            log.info("preset.precision=bf16-mixed on a CPU with AMX: the networks' convolutions in "
-                     "bfloat16, faster here than in float32")
+            log.info("preset.precision=%s on a CPU with AMX: the networks' convolutions in bfloat16, "
+                     "faster here than in float32 (preset.precision=32-true keeps float32)", preset.precision)
         else:
             log.warning("preset.precision=bf16-mixed on %s: this CPU has no bfloat16 hardware (AMX), so "
                         "its bfloat16 convolutions may run several times slower than float32", device)
