@@ -94,7 +94,7 @@ class Preset:
         """``precision`` for a fit on ``device``: ``auto`` made ``bf16-mixed`` where the device
         computes bfloat16 convolutions in hardware (:func:`unps.device.native_bfloat16`: a CUDA
         GPU, where the paper preset's fit of cat and pot1 took 15 % less time at 0.05-0.12° lower
-        error; a CPU with AMX, where the fast preset's took a quarter less at the same error on
+        error; a CPU with AMX, where the fast preset's took 0.60-0.71× the time at the same error on
         24 unseen objects) and ``32-true`` elsewhere (a 2-core AMD EPYC, which emulates
         bfloat16, ran it 6× slower)."""
         if self.precision != "auto":
