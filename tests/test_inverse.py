@@ -486,6 +486,7 @@ def test_bf16_on_a_cpu_warns_only_where_the_cpu_lacks_bfloat16_hardware(sphere, 
         [record] = [r for r in caplog.records if f"preset.precision={precision}" in r.getMessage()]
         assert said in record.getMessage()
         assert record.levelno == (logging.INFO if amx else logging.WARNING)
+    monkeypatch.setattr(torch.cpu, "_is_amx_tile_supported", lambda: False)
     caplog.clear()
     with caplog.at_level(logging.INFO):      # auto without AMX: float32, nothing to say
         system, _ = build_system(sphere, sphere.light_directions, Preset.from_config(**TINY),
