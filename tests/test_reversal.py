@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 
 from conftest import rendered
-from unps.data.analytic import dome_lights
+from unps.data.analytic import dome_lights, height_field
 from unps.data.subject import Subject
 from unps.lights import Lights, with_lights
-from unps.lights.reversal import HALF_TURN, ReversalTest, ShadowEvidence, shadow_evidence
+from unps.lights.reversal import (HALF_TURN, AttachedLight, ReversalTest, ShadowEvidence, attached_light,
+                                  shadow_evidence)
 from unps.solvers.rpca import robust_init
 
 
@@ -102,3 +103,68 @@ def test_a_flat_subject_gives_no_evidence_and_keeps_its_lights():
     found = evidence(subject, estimate)
     assert found.current_pairs == found.reversed_pairs == 0
     assert ReversalTest()(subject, estimate)[0] is estimate
+
+
+def interreflected(concave: bool, albedo: float = 0.7, size: int = 40, n_lights: int = 24) -> Subject:
+    """A hemisphere or the bowl it leaves in a plane, Lambertian with its attached shadows and the
+    first bounce of light between its facets (Nayar's kernel on the true surface), no cast
+    shadows: the shadow test has nothing to read."""
+    from unps.solvers.nayar import interreflection_kernel
+
+    depth, normals, mask = height_field("sphere", size, seed=0)
+    depth = np.where(mask, depth, 0.0)
+    if concave:
+        depth, normals = -depth, normals @ HALF_TURN.astype(np.float32)
+    lights = dome_lights(n_lights, seed=3)
+    direct = albedo * np.maximum(np.einsum("hwc,nc->nhw", normals, lights), 0)[:, mask]   # (n, m)
+    bounce = albedo * (interreflection_kernel(depth, normals, mask) @ direct.T).T
+    images = np.zeros((n_lights, size, size, 3), np.float32)
+    images[:, mask] = (direct + bounce)[..., None]
+    return Subject("bowl" if concave else "dome", images, mask, light_directions=lights,
+                   normals=normals)
+
+
+def test_a_bowl_read_inside_out_with_light_in_its_attached_shadows_is_kept_with_a_warning(caplog):
+    bowl = interreflected(concave=True)
+    estimate = turned(bowl)
+    normals = robust_init(with_lights(bowl, estimate), estimate.directions).normals
+    found = attached_light(bowl, estimate, normals)
+    assert found.points_to_reversal, found.describe()
+    assert found.reversed_share > 0.9 and found.current_share < 0.1
+    right = Lights(bowl.light_directions, None, "estimated")
+    normals = robust_init(with_lights(bowl, right), right.directions).normals
+    assert not attached_light(bowl, right, normals).points_to_reversal
+    kept, verdict = ReversalTest()(bowl, estimate)
+    assert kept is estimate and verdict.outcome == "kept"
+    assert verdict.evidence["attached_reversed_share"] > 0.9
+    assert "light.reversal.force=true" in caplog.text
+
+
+def test_a_dome_in_a_lit_room_is_never_turned_by_the_light_in_its_attached_shadows(caplog):
+    """A flat light on a convex object is accounted for by the bowl reading's interreflections
+    nearly as well as real interreflections would be: that cue alone warns, never turns."""
+    dome = interreflected(concave=False)
+    lit_room = dataclasses.replace(dome, images=dome.images + 0.05 * dome.mask[None, ..., None])
+    right = Lights(dome.light_directions, None, "estimated")
+    kept, verdict = ReversalTest()(lit_room, right)
+    assert kept is right and verdict.outcome == "kept"
+    assert verdict.evidence["attached_level"] > 0.03
+    assert "subtract a dark frame" in caplog.text
+
+
+def test_the_dark_dome_has_too_little_light_in_its_attached_shadows_to_read():
+    dome = interreflected(concave=False)
+    right = Lights(dome.light_directions, None, "estimated")
+    normals = robust_init(with_lights(dome, right), right.directions).normals
+    found = attached_light(dome, right, normals)
+    assert found.level < AttachedLight.MIN_LEVEL and np.isnan(found.reversed_share)
+    assert "too little" in found.describe() and "attached_reversed_share" not in found.as_dict()
+
+
+def test_force_turns_the_lights_without_reading_the_images():
+    dome = rendered(concave=False)
+    right = Lights(dome.light_directions, None, "estimated")
+    out, verdict = ReversalTest(force=True)(dome, right)
+    np.testing.assert_allclose(out.directions, dome.light_directions @ HALF_TURN, atol=1e-6)
+    assert verdict.outcome == "changed" and "force" in verdict.reason
+

@@ -20,7 +20,16 @@ both; the cues are what differs:
   one-bounce prediction explains (Nayar's kernel, :func:`unps.solvers.nayar.interreflection_kernel`,
   on the reading's integrated depth, lit by the observed images, times the Lambertian albedo;
   one free scale), for the current (``cur``) and reversed (``rev``) reading, and the mean observed
-  level there (``level``, in units of the images' 99th percentile).
+  level there (``level``, in units of the images' 99th percentile). Since a flat level of light
+  (ambient, a room's, light scattered under the surface) is "explained" by any positive
+  prediction, two more columns read what only interreflection would show: ``flat`` (per
+  reading, 1 − the scaled prediction's squared error over that of the best flat level: above 0
+  where the prediction follows where the light is) and ``pixel`` (the share explained of what
+  changes from image to image at a pixel, each pixel's mean over its attached images taken
+  out: ambient light does not change with the light; over the ``pairs`` of the pixels
+  attached in two images or more), and ``scale``, the reversed reading's
+  free scale (about the brightest material's albedo, at most 1, where the prediction is
+  interreflection).
 
 ``inside out`` marks the readings whose half turn is nearer the true lights.
 """
@@ -37,20 +46,14 @@ import numpy as np
 from unps.lightnet.estimate import network_lights
 from unps.lights import with_lights
 from unps.lights.contour import outward_normals
-from unps.lights.reversal import HALF_TURN, shadow_evidence
-from unps.geometry import integrate_normals
+from unps.lights.reversal import (HALF_TURN, attached_predictions, explained_share, shadow_evidence,
+                                  summarise_attached)
 from unps.metrics import angular_error
-from unps.solvers.nayar import interreflection_kernel
 from unps.solvers.rpca import robust_init
-from unps.solvers.woodham import rgb_albedo
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import benchmark  # noqa: E402
 import scenes  # noqa: E402
-
-ATTACHED = -0.05        # n·l below which a pixel is in attached shadow
-FACETS = 1500           # object pixels of the interreflection grid, at most
-
 
 def contour_facing(normals: np.ndarray, mask: np.ndarray) -> float:
     """Mean outward component of (H, W, 3) unit ``normals`` on the occluding contour of ``mask``
@@ -61,29 +64,39 @@ def contour_facing(normals: np.ndarray, mask: np.ndarray) -> float:
     return float((normals[contour][:, :2] * outward[contour][:, :2]).sum(1).mean())
 
 
-def attached_light(subject, lights, normals: np.ndarray) -> tuple[float, float, float, int]:
-    """(level, explained by the current reading, by the reversed one, pairs) of the light seen in
-    attached shadows; see the module."""
-    observed = with_lights(subject, lights).replace(normals=normals, depth=None)
-    factor = max(1, int(np.ceil(np.sqrt(observed.mask.sum() / FACETS))))
-    grid = observed.crop_to_mask(1).downsample(factor)
-    gray = grid.images[:, grid.mask].mean(-1)                                   # (n, m)
-    scale = np.quantile(gray, 0.99)
-    gray = gray / scale
-    facet_normals = grid.normals[grid.mask].astype(np.float64)
-    directions = lights.directions.astype(np.float64)
-    albedo = rgb_albedo(grid.images[:, grid.mask], facet_normals, directions).mean(-1) / scale
-    attached = (facet_normals @ directions.T).T < ATTACHED                     # (n, m)
-    depth = np.nan_to_num(integrate_normals(grid.normals, grid.mask))
-    seen = gray[attached]
-    explained = []
-    for z, n in ((depth, grid.normals), (-depth, grid.normals @ HALF_TURN)):
-        bounce = (interreflection_kernel(z, n, grid.mask) @ gray.T).T * albedo[None]
-        predicted = bounce[attached]
-        a = max((seen * predicted).sum() / max((predicted ** 2).sum(), 1e-12), 0.0)
-        explained.append(1 - ((seen - a * predicted) ** 2).sum() / max((seen ** 2).sum(), 1e-12))
-    level = float(seen.mean()) if seen.size else float("nan")
-    return level, float(explained[0]), float(explained[1]), int(attached.sum())
+def over_flat(seen: np.ndarray, predicted: np.ndarray) -> float:
+    """1 − the squared error of the one-scale fit ``scale · predicted`` to ``seen`` (both (k,))
+    over that of the best flat level (their mean); nan without pairs."""
+    if seen.size == 0:
+        return float("nan")
+    _, scale = explained_share(seen, predicted)
+    return float(1 - ((seen - scale * predicted) ** 2).sum() / max(((seen - seen.mean()) ** 2).sum(), 1e-12))
+
+
+def within_pixel(values: np.ndarray, attached: np.ndarray) -> np.ndarray:
+    """(n, m) ``values`` where ``attached``, less each pixel's mean over its attached images,
+    flat; pixels attached in fewer than two images left out."""
+    count = attached.sum(0)
+    mean = np.where(attached, values, 0).sum(0) / np.maximum(count, 1)
+    return (values - mean[None])[attached & (count >= 2)[None]]
+
+
+def attached_cues(subject, lights, normals: np.ndarray) -> dict[str, float]:
+    """The light seen in attached shadows and how each reading's one-bounce prediction explains
+    it (:func:`unps.lights.reversal.attached_predictions`; keys as the columns, see the module)."""
+    maps = attached_predictions(subject, lights, normals)
+    attached = maps["attached"]
+    seen, changes = maps["observed"][attached], within_pixel(maps["observed"], attached)
+    summary = summarise_attached(maps)
+    cues = {"level": summary.level if seen.size else float("nan"), "pairs": summary.pairs,
+            "cur": summary.current_share, "rev": summary.reversed_share,
+            "rev scale": summary.reversed_scale, "pixel pairs": int(changes.size),
+            "warns": summary.points_to_reversal}
+    for reading, key in (("current", "cur"), ("reversed", "rev")):
+        cues[f"{key} flat"] = over_flat(seen, maps[reading][attached])
+        cues[f"{key} pixel"] = (explained_share(changes, within_pixel(maps[reading], attached))[0]
+                                if changes.size else float("nan"))
+    return cues
 
 
 def main():
@@ -96,7 +109,8 @@ def main():
     args = parser.parse_args()
     logging.basicConfig(level=logging.ERROR)
     print(f"{'group':<9} {'case':<12} {'set':>3} {'network':>8} {'turned':>7} {'inside out':>10} "
-          f"{'rlift':>6} {'clift':>6} {'contour':>8} {'level':>6} {'cur':>6} {'rev':>6} {'pairs':>6}")
+          f"{'rlift':>6} {'clift':>6} {'contour':>8} {'level':>6} {'cur':>6} {'rev':>6} {'pairs':>6} "
+          f"{'flat':>13} {'pixel':>13} {'pairs':>6} {'scale':>6} {'warns':>5}")
     for group, name, label, read in benchmark.cases(args.only, args.sets, args.data, args.cache, args.names):
         subject = read()
         lights, _ = network_lights(subject, device="cpu")
@@ -104,11 +118,14 @@ def main():
         turned = angular_error(lights.directions @ HALF_TURN, subject.light_directions).mean()
         normals = robust_init(with_lights(subject, lights), lights.directions, device="cpu").normals
         evidence = shadow_evidence(subject, lights, normals)
-        level, current, reversed_, pairs = attached_light(subject, lights, normals)
+        cue = attached_cues(subject, lights, normals)
         print(f"{group:<9} {name:<12} {label:>3} {error:>7.2f}° {turned:>6.1f}° "
               f"{'yes' if turned < error else '':>10} {evidence.reversed_lift:>6.1f} "
               f"{evidence.current_lift:>6.1f} {contour_facing(normals, subject.mask):>+8.2f} "
-              f"{level:>6.3f} {current:>+6.2f} {reversed_:>+6.2f} {pairs:>6}", flush=True)
+              f"{cue['level']:>6.3f} {cue['cur']:>+6.2f} {cue['rev']:>+6.2f} {cue['pairs']:>6} "
+              f"{cue['cur flat']:>+6.2f} {cue['rev flat']:>+6.2f} {cue['cur pixel']:>+6.2f} "
+              f"{cue['rev pixel']:>+6.2f} {cue['pixel pairs']:>6} {cue['rev scale']:>6.2f} "
+              f"{'yes' if cue['warns'] else '':>5}", flush=True)
 
 
 if __name__ == "__main__":

@@ -15,6 +15,14 @@ says they should be lit. :class:`ReversalTest` turns the lights only on positive
 reversed reading's own shadows are dark far more often than lit pixels are and than the current
 reading's shadows are.
 
+Interreflection is the other cue a concave surface leaves: light where the shading says none
+arrives (pixels facing away from a light). :func:`attached_light` reads how much of it there is
+and how well each reading's one-bounce prediction accounts for it. A flat level of light (the
+room's, or light scattered under the surface) is accounted for nearly as well by any positive
+prediction, so this cue alone never turns the lights; where it points to the reversed reading,
+the test keeps them and warns (:attr:`AttachedLight.points_to_reversal`), and
+``light.reversal.force=true`` turns them.
+
 Frame: x right (+col), y up (−row), z toward the camera; orthographic view along +z.
 """
 
@@ -33,6 +41,7 @@ from unps.geometry import cast_shadows, integrate_normals
 from unps.data.lights import Verdict
 from unps.device import resolve_device
 from unps.lights import Lights, with_lights
+from unps.solvers.nayar import interreflection_kernel
 from unps.solvers.rpca import robust_init
 from unps.solvers.woodham import rgb_albedo, to_maps
 
@@ -43,6 +52,7 @@ LIT = 0.4            # n·l above which the shading says a pixel is lit (not gra
                      # glossy or rough material falls off faster than Lambertian)
 DARK = 0.25          # observed / Lambertian prediction below which a lit pixel counts as dark
 PRIOR_PAIRS = 5.0    # pseudo-counts that pull a small count's rate or lift toward no evidence
+ATTACHED = -0.05     # n·l below which a pixel is in attached shadow: no direct light reaches it
 
 
 @dataclass(frozen=True)
@@ -151,6 +161,136 @@ def shadow_evidence(subject: Subject, lights: Lights, normals: np.ndarray,
 
 
 @dataclass(frozen=True)
+class AttachedLight:
+    """The light seen where the shading says none arrives, and which reading accounts for it.
+
+    Attributes:
+        pairs: pairs of pixel and image in attached shadow (n·l < ``ATTACHED``; the same for both
+            readings, as n·l is).
+        level: their mean value, in units of the images' 99th percentile.
+        current_share, reversed_share: the share of Σ value² there that each reading's one-bounce
+            interreflection prediction explains with one free scale (:func:`attached_light`; nan
+            where it was not predicted).
+        reversed_scale: that scale for the reversed reading. The prediction is the light the
+            images show arriving from the rest of the surface times the Lambertian albedo, so a
+            scale near the brightest material's albedo (0.2–1) is what interreflection gives; a
+            flat light explained by a concave reading's prediction mostly needs far less (0.08
+            on DiLiGenT's ball, 1 % of its light in attached shadows).
+    """
+
+    pairs: int
+    level: float
+    current_share: float
+    reversed_share: float
+    reversed_scale: float
+
+    MIN_PAIRS: ClassVar[int] = 40
+    MIN_LEVEL: ClassVar[float] = 0.03
+    MIN_SHARE: ClassVar[float] = 0.6
+    MAX_CURRENT_SHARE: ClassVar[float] = 0.3
+    SCALES: ClassVar[tuple[float, float]] = (0.2, 2.0)
+
+    @property
+    def points_to_reversal(self) -> bool:
+        """Whether the light in attached shadows reads as the reversed reading's interreflections:
+        at least ``MIN_LEVEL`` of the 99th percentile over ``MIN_PAIRS`` pairs, at least
+        ``MIN_SHARE`` of it explained by the reversed reading at a scale within ``SCALES``, at most
+        ``MAX_CURRENT_SHARE`` by the current one. On the light benchmark
+        (``experiments/light_benchmark/reversal_cues.py``, 89 readings) it held on 7 of the 8
+        readings inside out (not the rose under 12 lights: 7 pairs) and on none read the right
+        way round; a flat light of the room's on a convex object can hold it too."""
+        low, high = self.SCALES
+        return (self.pairs >= self.MIN_PAIRS and self.level >= self.MIN_LEVEL
+                and self.reversed_share >= self.MIN_SHARE
+                and self.current_share <= self.MAX_CURRENT_SHARE
+                and low <= self.reversed_scale <= high)
+
+    def describe(self) -> str:
+        held = (f"{self.pairs} pairs of pixel and image in attached shadow hold "
+                f"{100 * self.level:.1f} % of the images' 99th percentile on average")
+        if np.isnan(self.reversed_share):
+            return held + ", too little to read as interreflection"
+        return (f"{held}; one-bounce interreflection explains {100 * self.current_share:.0f} % of it "
+                f"as read now, {100 * self.reversed_share:.0f} % as reversed (scale "
+                f"{self.reversed_scale:.2f})")
+
+    def as_dict(self) -> dict[str, float]:
+        """The figures by name, those not computed (nan) left out, and
+        ``attached_points_to_reversal`` (1 or 0)."""
+        figures = {f"attached_{name}": float(getattr(self, name)) for name in (
+            "pairs", "level", "current_share", "reversed_share", "reversed_scale")}
+        return ({name: value for name, value in figures.items() if not np.isnan(value)}
+                | {"attached_points_to_reversal": float(self.points_to_reversal)})
+
+
+def attached_predictions(subject: Subject, lights: Lights, normals: np.ndarray,
+                         max_facets: int = 1500, readings: bool = True) -> dict[str, np.ndarray]:
+    """The light in attached shadows and each reading's one-bounce prediction of it.
+
+    The subject and normals are cropped to the mask and block-averaged to at most ``max_facets``
+    object pixels (facets). Each reading's depth (integrated from the normals; −depth and the
+    half-turned normals for the reversed one) gives Nayar's kernel
+    (:func:`unps.solvers.nayar.interreflection_kernel`, with occlusion); the light facet j sends
+    toward facet i is its observed grey value, and facet i reflects it with its Lambertian albedo
+    (least squares with the lights as they are; the same for both readings).
+
+    Returns:
+        ``observed``, ``current`` and ``reversed``: (n, m) grey values and predictions over the m
+        facets, in units of the images' 99th percentile (the predictions only with ``readings``:
+        the kernels take most of the time, about a second each at 1500 facets on one CPU core);
+        ``attached``: (n, m) bool, n·l < ``ATTACHED``.
+    """
+    observed = with_lights(subject, lights).replace(normals=normals, depth=None)
+    factor = max(1, int(np.ceil(np.sqrt(observed.mask.sum() / max_facets))))
+    grid = observed.crop_to_mask(1).downsample(factor)
+    gray = grid.images[:, grid.mask].mean(-1).astype(np.float64)                # (n, m)
+    scale = max(float(np.quantile(gray, 0.99)), 1e-12)
+    facet_normals = grid.normals[grid.mask].astype(np.float64)
+    directions = lights.directions.astype(np.float64)
+    albedo = rgb_albedo(grid.images[:, grid.mask], facet_normals, directions).mean(-1) / scale
+    depth = np.nan_to_num(integrate_normals(grid.normals, grid.mask))
+    out = {"observed": gray / scale, "attached": (facet_normals @ directions.T).T < ATTACHED}
+    if not readings:
+        return out
+    for reading, z, n in (("current", depth, grid.normals), ("reversed", -depth, grid.normals @ HALF_TURN)):
+        out[reading] = (interreflection_kernel(z, n, grid.mask) @ out["observed"].T).T * albedo[None]
+    return out
+
+
+def explained_share(seen: np.ndarray, predicted: np.ndarray) -> tuple[float, float]:
+    """(share of Σ seen² that ``scale · predicted`` explains, the least-squares scale ≥ 0) for
+    (k,) ``seen`` and ``predicted``; (0, 0) without pairs."""
+    if seen.size == 0:
+        return 0.0, 0.0
+    scale = max(float((seen * predicted).sum() / max((predicted ** 2).sum(), 1e-12)), 0.0)
+    return float(1 - ((seen - scale * predicted) ** 2).sum() / max((seen ** 2).sum(), 1e-12)), scale
+
+
+def summarise_attached(maps: dict[str, np.ndarray]) -> AttachedLight:
+    """:class:`AttachedLight` of :func:`attached_predictions`' maps (the shares and scale nan
+    where it left the predictions out)."""
+    attached = maps["attached"]
+    seen = maps["observed"][attached]
+    current = reversed_ = scale = float("nan")
+    if "current" in maps:
+        current, _ = explained_share(seen, maps["current"][attached])
+        reversed_, scale = explained_share(seen, maps["reversed"][attached])
+    return AttachedLight(int(attached.sum()), float(seen.mean()) if seen.size else 0.0,
+                         current, reversed_, scale)
+
+
+def attached_light(subject: Subject, lights: Lights, normals: np.ndarray) -> AttachedLight:
+    """:class:`AttachedLight` of the two readings from (H, W, 3) ``normals`` estimated with
+    ``lights``; the predictions are left out (shares nan) where too little light or too few
+    pairs could point to the reversal anyway."""
+    maps = attached_predictions(subject, lights, normals, readings=False)
+    found = summarise_attached(maps)
+    if found.pairs < AttachedLight.MIN_PAIRS or found.level < AttachedLight.MIN_LEVEL:
+        return found
+    return summarise_attached(attached_predictions(subject, lights, normals))
+
+
+@dataclass(frozen=True)
 class ReversalTest:
     """The light stage that turns the lights half a turn about the view when, and only when, the
     shadows of the reversed reading are there in the images (positive evidence).
@@ -168,11 +308,17 @@ class ReversalTest:
     those of the three readings inside out that cast shadows 8–45× (dark in 40–57 % of their
     pairs).
 
+    Where the shadows say nothing but the light in attached shadows reads as the reversed
+    reading's interreflections (:attr:`AttachedLight.points_to_reversal`), the lights stay and a
+    warning says so; ``force`` turns them whatever the evidence, for an object known to be
+    hollow where the normals show it bulging.
+
     Attributes:
         hit_rate: share of the reversed reading's own shadow pairs that must be dark.
         contrast: how many times more often than expected of their pixels, and than the current
             reading's shadows, they must be dark.
         min_pairs: pairs of pixel and image in the reversed reading's own shadows, at least.
+        force: turn the lights without reading any evidence.
         device: where the robust initialisation and the shadows run (the run's ``device=``).
     """
 
@@ -180,6 +326,7 @@ class ReversalTest:
     hit_rate: float = 0.3
     contrast: float = 4.0
     min_pairs: int = 50
+    force: bool = False
     device: str = "auto"
 
     def favours_reversal(self, evidence: ShadowEvidence) -> bool:
@@ -189,7 +336,8 @@ class ReversalTest:
                 and lift >= self.contrast and lift >= self.contrast * evidence.current_lift)
 
     def __call__(self, subject: Subject, lights: Lights) -> tuple[Lights, Verdict]:
-        """The lights, or the lights half a turn about the view axis when the shadows say so.
+        """The lights, or the lights half a turn about the view axis when the shadows say so (or
+        ``force``).
 
         Args:
             subject: its captured images and mask.
@@ -197,23 +345,43 @@ class ReversalTest:
 
         Returns:
             ``lights`` with directions (l_x, l_y, l_z) → (−l_x, −l_y, l_z) when
-            :meth:`favours_reversal`, else ``lights`` itself (intensities unchanged); and the
-            verdict with the counts of :class:`ShadowEvidence`.
+            :meth:`favours_reversal` or ``force``, else ``lights`` itself (intensities
+            unchanged); and the verdict with the counts of :class:`ShadowEvidence` and the
+            figures of :class:`AttachedLight`.
         """
+        if self.force:
+            log.warning("light.reversal.force=true: turned the estimated lights half a turn about "
+                        "the view axis without reading the images")
+            return half_turned(lights), Verdict(self.name, "changed", "turned the lights half a turn "
+                                                "about the view: light.reversal.force=true")
         device = resolve_device(self.device)
         cropped = subject.crop_to_mask(1)         # shadow_evidence's crop: the same pixels, less to divide
         normals = robust_init(with_lights(cropped, lights), lights.directions, device=device).normals
         evidence = shadow_evidence(cropped, lights, normals, device=device)
-        if not self.favours_reversal(evidence):
-            return lights, Verdict(self.name, "kept", "the cast shadows do not say the lights read "
-                                   "the surface inside out (" + evidence.describe() + ")",
-                                   evidence.as_dict())
-        log.warning("cast shadows say the estimated lights read the surface inside out (concave "
-                    "for convex): turned them half a turn about the view axis (%s); if the object "
-                    "has no hollows that cast shadows, rerun with light.stages without reversal",
-                    evidence.describe())
-        directions = (lights.directions.astype(np.float64) @ HALF_TURN).astype(np.float32)
-        turned = dataclasses.replace(lights, directions=directions)
-        return turned, Verdict(self.name, "changed", "turned the lights half a turn about the view: "
-                               "the reversed reading's shadows are dark in the images ("
-                               + evidence.describe() + ")", evidence.as_dict())
+        if self.favours_reversal(evidence):
+            log.warning("cast shadows say the estimated lights read the surface inside out (concave "
+                        "for convex): turned them half a turn about the view axis (%s); if the object "
+                        "has no hollows that cast shadows, rerun with light.stages without reversal",
+                        evidence.describe())
+            return half_turned(lights), Verdict(self.name, "changed", "turned the lights half a turn "
+                                                "about the view: the reversed reading's shadows are "
+                                                "dark in the images (" + evidence.describe() + ")",
+                                                evidence.as_dict())
+        attached = attached_light(cropped, lights, normals)
+        reason = ("the cast shadows do not say the lights read the surface inside out ("
+                  + evidence.describe() + "); " + attached.describe())
+        if attached.points_to_reversal:
+            log.warning("the estimated lights may read the surface inside out (concave for convex): "
+                        "the light in its attached shadows reads as the interreflections of the "
+                        "reversed reading (%s), though no cast shadow shows it, so the lights stay. "
+                        "If the normal map shows the object bulging where it is hollow, rerun with "
+                        "light.reversal.force=true; if the room's light reached it, subtract a dark "
+                        "frame from the images", attached.describe())
+            reason += ": as the reversed reading's interreflections, but not turned on that alone"
+        return lights, Verdict(self.name, "kept", reason, evidence.as_dict() | attached.as_dict())
+
+
+def half_turned(lights: Lights) -> Lights:
+    """``lights`` with directions (l_x, l_y, l_z) → (−l_x, −l_y, l_z), intensities unchanged."""
+    directions = (lights.directions.astype(np.float64) @ HALF_TURN).astype(np.float32)
+    return dataclasses.replace(lights, directions=directions)
