@@ -10,7 +10,7 @@ from unps.data.analytic import dome_lights, height_field
 from unps.data.subject import Subject
 from unps.lights import Lights, with_lights
 from unps.lights.reversal import (HALF_TURN, AttachedLight, ReversalTest, ShadowEvidence, attached_light,
-                                  reading_in_doubt, shadow_evidence)
+                                  shadow_evidence)
 from unps.solvers.rpca import robust_init
 
 
@@ -168,23 +168,3 @@ def test_force_turns_the_lights_without_reading_the_images():
     np.testing.assert_allclose(out.directions, dome.light_directions @ HALF_TURN, atol=1e-6)
     assert verdict.outcome == "changed" and "force" in verdict.reason
 
-
-
-def test_the_fit_does_not_learn_lights_the_reversal_test_doubts():
-    from unps.pipeline.run import without_refinement
-
-    bowl = interreflected(concave=True)
-    estimate = turned(bowl)
-    kept, verdict = ReversalTest()(bowl, estimate)
-    doubted = dataclasses.replace(kept, verdicts=(verdict,))
-    assert reading_in_doubt(doubted)
-    right = Lights(bowl.light_directions, None, "estimated")
-    assert not reading_in_doubt(dataclasses.replace(right, verdicts=(ReversalTest()(bowl, right)[1],)))
-
-    asked = []
-    out, method = without_refinement(doubted, lambda subject, directions, refine_lights=True:
-                                     asked.append(refine_lights), bowl)
-    method(bowl, out.directions)
-    assert asked == [False]
-    assert [(v.stage, v.outcome) for v in out.verdicts] == [("reversal", "kept"), ("fit", "declined")]
-    np.testing.assert_array_equal(out.directions, estimate.directions)

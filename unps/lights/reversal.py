@@ -381,17 +381,6 @@ class ReversalTest:
         return lights, Verdict(self.name, "kept", reason, evidence.as_dict() | attached.as_dict())
 
 
-def reading_in_doubt(lights: Lights) -> bool:
-    """Whether the reversal test kept ``lights`` though the light in the attached shadows read as
-    the reversed reading's interreflections (its verdict in ``lights.verdicts``): the surface
-    may be inside out, and a fit that learns the lights further would bend them to render it
-    (on the light benchmark it took a rose read inside out 2.3° and 3.2° further off, under 96
-    and 20 lights)."""
-    return any(verdict.stage == ReversalTest.name and verdict.outcome == "kept"
-               and verdict.evidence.get("attached_points_to_reversal", 0) > 0
-               for verdict in lights.verdicts)
-
-
 def half_turned(lights: Lights) -> Lights:
     """``lights`` with directions (l_x, l_y, l_z) → (−l_x, −l_y, l_z), intensities unchanged."""
     directions = (lights.directions.astype(np.float64) @ HALF_TURN).astype(np.float32)

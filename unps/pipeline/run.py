@@ -6,9 +6,7 @@ from __future__ import annotations
 
 import logging
 import time
-from functools import partial
 from pathlib import Path
-from collections.abc import Callable
 from typing import Any
 
 from hydra.utils import instantiate
@@ -19,12 +17,10 @@ from unps.allocator import keep_freed_memory
 from unps.data.checks import check_light_span, collected_warnings, usable_subject
 from unps.data.lights import Verdict
 from unps.data.prepare import add_noise
-from unps.data.subject import Subject
 from unps.device import describe, peak_memory_gb, resolve_device
 from unps.errors import InputError
 from unps.geometry import integrate_normals
 from unps.lights import Lights, ground_truth, light_errors, with_lights
-from unps.lights.reversal import reading_in_doubt
 from unps.lights.stages import record
 from unps.metrics import angular_error, normal_metrics
 from unps.threads import set_fit_threads
@@ -80,18 +76,6 @@ def learns_lights(light: DictConfig, method: DictConfig) -> bool:
     return bool(refine) and can
 
 
-def without_refinement(lights: Lights, method: Callable, subject: Subject) -> tuple[Lights, Callable]:
-    """``lights`` with the fit's step declined in their verdicts, and ``method`` that takes them
-    as they are: for ``light.refine=auto`` where the reversal test says the surface may be read
-    inside out (:func:`unps.lights.reversal.reading_in_doubt`)."""
-    log.warning("the fit takes the lights as the light stages left them: the reversal test says "
-                "the surface may be read inside out, and learning the lights further would bend "
-                "them to render it (light.refine=true learns them all the same)")
-    declined = Verdict("fit", "declined", "not learnt with the surface: the reversal test says it "
-                       "may be read inside out")
-    return record(lights, declined, subject), partial(method, refine_lights=False)
-
-
 def fit(cfg: DictConfig) -> dict:
     """Run one method on one subject and write every output into ``cfg.paths.output_dir``.
 
@@ -130,12 +114,9 @@ def run_fit(cfg: DictConfig, seconds: dict[str, float], warnings: list[str]) -> 
     subject, noise_reference = add_noise(subject, cfg.noise, seed=cfg.seed)
     original = subject
     light_name, light_source = build(cfg.light)
-    refine = learns_lights(cfg.light, cfg.method)
-    method_name, method = build(cfg.method, refine_lights=refine)
+    method_name, method = build(cfg.method, refine_lights=learns_lights(cfg.light, cfg.method))
     with stage("lights"):
         lights = light_source(subject)
-    if refine and cfg.light.get("refine") == "auto" and reading_in_doubt(lights):
-        lights, method = without_refinement(lights, method, original)
     condition = check_light_span(lights.directions, f"the lights of {subject.name!r} ({light_name})",
                                  estimated=lights.source != "gt")
     light_metrics = {}
