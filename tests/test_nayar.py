@@ -45,6 +45,27 @@ def test_visibility_is_blocked_by_a_wall():
     assert (v == v.T).all()
 
 
+def test_visibility_of_chosen_pairs_samples_those_segments_alone_to_the_same_values():
+    depth = np.zeros((7, 9))
+    depth[:, 4] = 10.0
+    depth[2, 1] = 3.0
+    mask = np.ones((7, 9), bool)
+    chosen = np.random.default_rng(0).random((63, 63)) < 0.3
+    full, some = visibility(depth, mask, chunk=5), visibility(depth, mask, chunk=5, pairs=chosen)
+    np.testing.assert_array_equal(some, full & chosen)
+    assert not full.all() and (full & chosen).any()
+
+
+def test_the_kernel_samples_visibility_only_where_facets_face_each_other():
+    """Restricting the segments it samples leaves the kernel as it is, bit for bit."""
+    z, n, mask = groove(12)
+    z[3:6, 2] += 4.0                                     # a bump on one wall shades the other
+    k = interreflection_kernel(z, n, mask)
+    unoccluded = interreflection_kernel(z, n, mask, occlusion=False)
+    np.testing.assert_array_equal(k, unoccluded * visibility(z, mask))
+    assert (k < unoccluded).any()
+
+
 def test_removing_interreflections_inverts_the_forward_model():
     z, n, mask = groove(12)
     k = interreflection_kernel(z, n, mask)

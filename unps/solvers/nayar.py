@@ -39,25 +39,30 @@ def facet_positions(depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return np.stack([cols, -rows, depth[mask]], 1).astype(np.float64)
 
 
-def visibility(depth: np.ndarray, mask: np.ndarray, steps: int = 16, chunk: int = 256) -> np.ndarray:
+def visibility(depth: np.ndarray, mask: np.ndarray, steps: int = 16, chunk: int = 256,
+               pairs: np.ndarray | None = None) -> np.ndarray:
     """(m, m) bool: whether the segment between two facets clears the surface.
 
     The segment is sampled at ``steps`` interior points; it is blocked where the depth map,
     interpolated bilinearly (off the object it never blocks), stands above it by more than
-    0.05 pixel. Rows are processed ``chunk`` facets at a time to bound memory.
+    0.05 pixel. ``chunk`` × m segments are sampled at a time to bound memory. With ``pairs``
+    ((m, m) bool) only those segments are sampled, each to the same values, and the others are
+    False.
     """
     rows, cols = np.nonzero(mask)
     z = depth[mask]
+    m = len(z)
     surface = np.where(mask, depth, -1e9)
-    t = np.linspace(0, 1, steps + 2)[1:-1, None, None]
-    visible = np.empty((len(z), len(z)), bool)
-    for start in range(0, len(z), chunk):
-        i = slice(start, start + chunk)
-        r = rows[i, None] + t * (rows[None, :] - rows[i, None])
-        c = cols[i, None] + t * (cols[None, :] - cols[i, None])
-        height = z[i, None] + t * (z[None, :] - z[i, None])
+    t = np.linspace(0, 1, steps + 2)[1:-1, None]
+    first, second = np.nonzero(np.ones((m, m), bool) if pairs is None else pairs)
+    visible = np.zeros((m, m), bool)
+    for start in range(0, len(first), chunk * m):
+        i, j = first[start:start + chunk * m], second[start:start + chunk * m]
+        r = rows[i] + t * (rows[j] - rows[i])                                 # (steps, pairs)
+        c = cols[i] + t * (cols[j] - cols[i])
+        height = z[i] + t * (z[j] - z[i])
         sampled = map_coordinates(surface, [r.ravel(), c.ravel()], order=1, mode="nearest")
-        visible[i] = ~(sampled.reshape(r.shape) > height + 0.05).any(0)
+        visible[i, j] = ~(sampled.reshape(r.shape) > height + 0.05).any(0)
     return visible
 
 
@@ -89,7 +94,7 @@ def interreflection_kernel(depth: np.ndarray, normals: np.ndarray, mask: np.ndar
     area = 1 / np.maximum(n[:, 2], 0.05)
     k = cos_i * cos_j / (np.pi * r2 ** 2) * area[None, :]
     if occlusion:
-        k *= visibility(depth, mask)
+        k *= visibility(depth, mask, pairs=k > 0)     # only facets that face each other
     return k
 
 
