@@ -11,6 +11,7 @@ from unps.data.subject import Subject
 from unps.lights import Lights, with_lights
 from unps.lights.reversal import (HALF_TURN, AttachedLight, ReversalTest, ShadowEvidence, attached_light,
                                   shadow_evidence)
+from unps.solvers.nayar import interreflection_kernel
 from unps.solvers.rpca import robust_init
 
 
@@ -109,8 +110,6 @@ def interreflected(concave: bool, albedo: float = 0.7, size: int = 40, n_lights:
     """A hemisphere or the bowl it leaves in a plane, Lambertian with its attached shadows and the
     first bounce of light between its facets (Nayar's kernel on the true surface), no cast
     shadows: the shadow test has nothing to read."""
-    from unps.solvers.nayar import interreflection_kernel
-
     depth, normals, mask = height_field("sphere", size, seed=0)
     depth = np.where(mask, depth, 0.0)
     if concave:
@@ -167,4 +166,3 @@ def test_force_turns_the_lights_without_reading_the_images():
     out, verdict = ReversalTest(force=True)(dome, right)
     np.testing.assert_allclose(out.directions, dome.light_directions @ HALF_TURN, atol=1e-6)
     assert verdict.outcome == "changed" and "force" in verdict.reason
-

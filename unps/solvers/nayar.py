@@ -45,7 +45,7 @@ def visibility(depth: np.ndarray, mask: np.ndarray, steps: int = 16, chunk: int 
 
     The segment is sampled at ``steps`` interior points; it is blocked where the depth map,
     interpolated bilinearly (off the object it never blocks), stands above it by more than
-    0.05 pixel. ``chunk`` × m segments are sampled at a time to bound memory. With ``pairs``
+    0.05 pixel. Rows are processed ``chunk`` facets at a time to bound memory. With ``pairs``
     ((m, m) bool) only those segments are sampled, each to the same values, and the others are
     False.
     """
@@ -54,10 +54,11 @@ def visibility(depth: np.ndarray, mask: np.ndarray, steps: int = 16, chunk: int 
     m = len(z)
     surface = np.where(mask, depth, -1e9)
     t = np.linspace(0, 1, steps + 2)[1:-1, None]
-    first, second = np.nonzero(np.ones((m, m), bool) if pairs is None else pairs)
     visible = np.zeros((m, m), bool)
-    for start in range(0, len(first), chunk * m):
-        i, j = first[start:start + chunk * m], second[start:start + chunk * m]
+    for start in range(0, m, chunk):
+        block = np.ones((min(chunk, m - start), m), bool) if pairs is None else pairs[start:start + chunk]
+        i, j = np.nonzero(block)
+        i += start
         r = rows[i] + t * (rows[j] - rows[i])                                 # (steps, pairs)
         c = cols[i] + t * (cols[j] - cols[i])
         height = z[i] + t * (z[j] - z[i])
