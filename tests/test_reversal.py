@@ -8,6 +8,7 @@ import pytest
 from conftest import rendered
 from unps.data.analytic import dome_lights, height_field
 from unps.data.subject import Subject
+from unps.errors import InputError
 from unps.lights import Lights, with_lights
 from unps.lights.reversal import (HALF_TURN, AttachedLight, ReversalTest, ShadowEvidence, attached_light,
                                   shadow_evidence)
@@ -166,3 +167,8 @@ def test_force_turns_the_lights_without_reading_the_images():
     out, verdict = ReversalTest(force=True)(dome, right)
     np.testing.assert_allclose(out.directions, dome.light_directions @ HALF_TURN, atol=1e-6)
     assert verdict.outcome == "changed" and "force" in verdict.reason
+
+
+def test_force_that_is_not_true_or_false_is_refused_by_name():
+    with pytest.raises(InputError, match=r"light.reversal.force must be true or false, got 'ture'"):
+        ReversalTest(force="ture")

@@ -40,6 +40,7 @@ from unps.data.subject import Subject
 from unps.geometry import cast_shadows, integrate_normals
 from unps.data.lights import Verdict
 from unps.device import resolve_device
+from unps.errors import InputError
 from unps.lights import Lights, with_lights
 from unps.solvers.nayar import interreflection_kernel
 from unps.solvers.rpca import robust_init
@@ -329,6 +330,10 @@ class ReversalTest:
     min_pairs: int = 50
     force: bool = False
     device: str = "auto"
+
+    def __post_init__(self):
+        if not isinstance(self.force, bool):
+            raise InputError(f"light.reversal.force must be true or false, got {self.force!r}")
 
     def favours_reversal(self, evidence: ShadowEvidence) -> bool:
         """Whether the evidence is positive for the reversed reading (see the class)."""
