@@ -454,14 +454,21 @@ def test_twenty_steps_on_a_tiny_sphere_lower_the_loss_and_the_error():
     assert mae1 < 0.5 * mae0           # measured: 72° → 22°
 
 
+def cpu_with(monkeypatch, amx: bool, avx512_bf16: bool) -> None:
+    """Make torch's checks report a CPU with (or without) AMX tiles and AVX512-BF16 instructions."""
+    monkeypatch.setattr(torch.cpu, "_is_amx_tile_supported", lambda: amx)
+    monkeypatch.setattr(torch.cpu, "_is_avx512_bf16_supported", lambda: avx512_bf16)
+
+
 def test_the_networks_precision_is_bfloat16_where_the_hardware_has_it_unless_chosen(monkeypatch):
     auto, chosen = Preset.from_config(), Preset.from_config(precision="bf16-mixed")
     assert auto.precision == "auto"
-    for amx, precision in ((False, "32-true"), (True, "bf16-mixed")):
-        monkeypatch.setattr(torch.cpu, "_is_amx_tile_supported", lambda amx=amx: amx)
+    for amx, avx512_bf16, precision in ((False, False, "32-true"), (True, False, "bf16-mixed"),
+                                        (False, True, "bf16-mixed"), (True, True, "bf16-mixed")):
+        cpu_with(monkeypatch, amx, avx512_bf16)
         assert auto.network_precision(torch.device("cpu")) == precision
         assert Preset.from_config(precision="32-true").network_precision(torch.device("cpu")) == "32-true"
-    monkeypatch.setattr(torch.cpu, "_is_amx_tile_supported", lambda: False)
+    cpu_with(monkeypatch, amx=False, avx512_bf16=False)
     assert auto.network_precision(torch.device("cuda", 1)) == "bf16-mixed"
     assert chosen.network_precision(torch.device("cpu")) == "bf16-mixed"
     assert Preset.from_config(precision="32-true").network_precision(torch.device("cuda")) == "32-true"
@@ -471,13 +478,18 @@ def test_the_networks_precision_is_bfloat16_where_the_hardware_has_it_unless_cho
 
 
 def test_bf16_on_a_cpu_warns_only_where_the_cpu_lacks_bfloat16_hardware(sphere, caplog, monkeypatch):
-    """A CPU with AMX runs bfloat16 convolutions faster than float32 (experiments/speed): the fit
-    says so; one without is warned that they may run several times slower."""
-    for precision, amx, said in (("bf16-mixed", True, "on a CPU with AMX"), ("auto", True, "on a CPU with AMX"),
-                                 ("bf16-mixed", False, "no bfloat16 hardware")):
+    """A CPU with AMX or AVX512-BF16 runs bfloat16 convolutions faster than float32
+    (experiments/speed): the fit says so; one with neither is warned that they may run several
+    times slower."""
+    said_native = "on a CPU with bfloat16 instructions (AMX or AVX512-BF16)"
+    for precision, amx, avx512_bf16, said in (("bf16-mixed", True, False, said_native),
+                                              ("auto", True, False, said_native),
+                                              ("auto", False, True, said_native),
+                                              ("bf16-mixed", False, False, "no bfloat16 instructions")):
         preset = Preset.from_config(**TINY, precision=precision)
-        monkeypatch.setattr(torch.cpu, "_is_amx_tile_supported", lambda amx=amx: amx)
-        assert native_bfloat16(torch.device("cpu")) is amx
+        cpu_with(monkeypatch, amx, avx512_bf16)
+        native = amx or avx512_bf16
+        assert native_bfloat16(torch.device("cpu")) is native
         caplog.clear()
         with caplog.at_level(logging.INFO):
             system, _ = build_system(sphere, sphere.light_directions, preset, InterreflectionModel(enabled=False),
@@ -485,10 +497,10 @@ def test_bf16_on_a_cpu_warns_only_where_the_cpu_lacks_bfloat16_hardware(sphere, 
         assert system.networks_in_bf16
         [record] = [r for r in caplog.records if f"preset.precision={precision}" in r.getMessage()]
         assert said in record.getMessage()
-        assert record.levelno == (logging.INFO if amx else logging.WARNING)
-    monkeypatch.setattr(torch.cpu, "_is_amx_tile_supported", lambda: False)
+        assert record.levelno == (logging.INFO if native else logging.WARNING)
+    cpu_with(monkeypatch, amx=False, avx512_bf16=False)
     caplog.clear()
-    with caplog.at_level(logging.INFO):      # auto without AMX: float32, nothing to say
+    with caplog.at_level(logging.INFO):      # auto without either: float32, nothing to say
         system, _ = build_system(sphere, sphere.light_directions, Preset.from_config(**TINY),
                                  InterreflectionModel(enabled=False), False, "")
     assert not system.networks_in_bf16 and "preset.precision" not in caplog.text
@@ -500,11 +512,11 @@ def test_networks_in_bf16_render_float32_maps_close_to_the_float32_ones(sphere, 
     (the maps differ from float32's) and hand float32 maps to the physics: unit normals within a
     degree of float32's on average, reflectance within a percent (measured: 0.43°, 0.11 %)."""
     torch.manual_seed(0)
-    monkeypatch.setattr(torch.cpu, "_is_amx_tile_supported", lambda: False)
+    cpu_with(monkeypatch, amx=False, avx512_bf16=False)
     system, _ = build_system(sphere, sphere.light_directions, Preset.from_config(**TINY, precision="bf16-mixed"),
                              InterreflectionModel(enabled=False), False, "")
     assert system.networks_in_bf16
-    assert "preset.precision=bf16-mixed on cpu: this CPU has no bfloat16 hardware" in caplog.text
+    assert "preset.precision=bf16-mixed on cpu: this CPU has no bfloat16 instructions" in caplog.text
     index = torch.arange(sphere.n_images)
     with torch.no_grad():
         half = system.render(index, noise=False)

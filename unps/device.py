@@ -78,13 +78,18 @@ def to_device(tensor: torch.Tensor, device: torch.device) -> torch.Tensor:
 
 def native_bfloat16(device: torch.device) -> bool:
     """Whether ``device`` computes bfloat16 convolutions in hardware: a CUDA GPU, or a CPU with
-    AMX tiles (Intel Xeon since Sapphire Rapids; torch's own check). Elsewhere oneDNN emulates
-    them: a 2-core AMD EPYC ran the fit's networks 6× slower in bfloat16 than in float32, a 2-core
-    Intel Xeon with AMX 0.7–0.8× (``experiments/speed/README.md``)."""
+    AMX tiles (Intel Xeon since Sapphire Rapids) or AVX512-BF16 instructions (AMD EPYC since Zen 4,
+    Intel Xeon since Cooper Lake), by torch's own checks. Elsewhere oneDNN emulates them: a 2-core
+    CPU without either ran the fit's networks 6× slower in bfloat16 than in float32; a 2-core Intel
+    Xeon with AMX ran them in 0.7–0.8× the time, a 2-core AMD EPYC with AVX512-BF16 in 0.65×
+    (``experiments/speed/README.md``)."""
     if device.type == "cuda":
         return True
-    has_amx = getattr(torch.cpu, "_is_amx_tile_supported", None)
-    return device.type == "cpu" and has_amx is not None and bool(has_amx())
+    if device.type != "cpu":
+        return False
+    names = ("_is_amx_tile_supported", "_is_avx512_bf16_supported")
+    checks = [getattr(torch.cpu, name, None) for name in names]
+    return any(check is not None and bool(check()) for check in checks)
 
 
 def peak_memory_gb(device: torch.device) -> float | None:

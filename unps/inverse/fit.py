@@ -317,11 +317,13 @@ def build_system(work: Subject, light_directions: np.ndarray, preset: Preset,
     precision = preset.network_precision(device)
     if precision == "bf16-mixed" and device.type != "cuda":
         if native_bfloat16(device):
-            log.info("preset.precision=%s on a CPU with AMX: the networks' convolutions in bfloat16, "
-                     "faster here than in float32 (preset.precision=32-true keeps float32)", preset.precision)
+            log.info("preset.precision=%s on a CPU with bfloat16 instructions (AMX or AVX512-BF16): the "
+                     "networks' convolutions in bfloat16, faster here than in float32 "
+                     "(preset.precision=32-true keeps float32)", preset.precision)
         else:
-            log.warning("preset.precision=bf16-mixed on %s: this CPU has no bfloat16 hardware (AMX), so "
-                        "its bfloat16 convolutions may run several times slower than float32", device)
+            log.warning("preset.precision=bf16-mixed on %s: this CPU has no bfloat16 instructions (AMX, "
+                        "AVX512-BF16), so its bfloat16 convolutions may run several times slower than "
+                        "float32", device)
     normal_net = NormalNet(work.n_images, preset.width, preset.depth, preset.first_kernel, preset.batch_norm)
     reflectance_net = ReflectanceNet(preset.width, preset.reflectance_width, preset.reflectance_depth,
                                      preset.batch_norm, preset.reflectance_branch)

@@ -51,7 +51,8 @@ class Preset:
         precision: ``32-true``; ``bf16-mixed``, the two networks' convolutions in bfloat16
             (autocast; a GPU's tensor cores), their outputs and every other step of the rendering
             and the loss in float32; ``auto``, bf16-mixed where the device has bfloat16
-            hardware (a CUDA GPU, a CPU with AMX) and 32-true elsewhere (:meth:`network_precision`).
+            hardware (a CUDA GPU, a CPU with AMX or AVX512-BF16) and 32-true elsewhere
+            (:meth:`network_precision`).
         schedule: the optimisation's :class:`Schedule`.
     """
 
@@ -94,9 +95,9 @@ class Preset:
         """``precision`` for a fit on ``device``: ``auto`` made ``bf16-mixed`` where the device
         computes bfloat16 convolutions in hardware (:func:`unps.device.native_bfloat16`: a CUDA
         GPU, where the paper preset's fit of cat and pot1 took 15 % less time at 0.05-0.12° lower
-        error; a CPU with AMX, where the fast preset's took 0.60-0.71× the time at the same error on
-        24 unseen objects) and ``32-true`` elsewhere (a 2-core AMD EPYC, which emulates
-        bfloat16, ran it 6× slower)."""
+        error; a CPU with AMX or AVX512-BF16, where the fast preset's took 0.60-0.71× the time at
+        the same error on 24 unseen objects) and ``32-true`` elsewhere (a 2-core CPU without
+        either, which emulates bfloat16, ran it 6× slower)."""
         if self.precision != "auto":
             return self.precision
         return "bf16-mixed" if native_bfloat16(device) else "32-true"
