@@ -224,23 +224,18 @@ class AttachedLight:
                 | {"attached_points_to_reversal": float(self.points_to_reversal)})
 
 
-def attached_predictions(subject: Subject, lights: Lights, normals: np.ndarray,
-                         max_facets: int = 1500, readings: bool = True) -> dict[str, np.ndarray]:
-    """The light in attached shadows and each reading's one-bounce prediction of it.
+def attached_facets(subject: Subject, lights: Lights, normals: np.ndarray,
+                    max_facets: int = 1500) -> tuple[Subject, dict[str, np.ndarray], np.ndarray]:
+    """The light in attached shadows, on facets.
 
-    The subject and normals are cropped to the mask and block-averaged to at most ``max_facets``
-    object pixels (facets). Each reading's depth (integrated from the normals; −depth and the
-    half-turned normals for the reversed one) gives Nayar's kernel
-    (:func:`unps.solvers.nayar.interreflection_kernel`, with occlusion); the light facet j sends
-    toward facet i is its observed grey value, and facet i reflects it with its Lambertian albedo
-    (least squares with the lights as they are; the same for both readings).
+    The subject and (H, W, 3) normals are cropped to the mask and block-averaged to at most
+    ``max_facets`` object pixels (facets).
 
     Returns:
-        ``observed``, ``current`` and ``reversed``: (n, m) grey values and predictions over the m
-        facets, in units of the images' 99th percentile (the predictions only with ``readings``:
-        the kernels take most of the time, 0.6–0.7 s for both at 1500 facets on one CPU core
-        where a hollow reading keeps most pairs);
-        ``attached``: (n, m) bool, n·l < ``ATTACHED``.
+        the facets' grid (a :class:`Subject` with the normals); the maps ``observed``, (n, m)
+        grey values over the m facets in units of the images' 99th percentile, and ``attached``,
+        (n, m) bool, n·l < ``ATTACHED``; and the (m,) Lambertian albedo in the same units (least
+        squares with the lights as they are).
     """
     observed = with_lights(subject, lights).replace(normals=normals, depth=None)
     factor = max(1, int(np.ceil(np.sqrt(observed.mask.sum() / max_facets))))
@@ -250,13 +245,33 @@ def attached_predictions(subject: Subject, lights: Lights, normals: np.ndarray,
     facet_normals = grid.normals[grid.mask].astype(np.float64)
     directions = lights.directions.astype(np.float64)
     albedo = rgb_albedo(grid.images[:, grid.mask], facet_normals, directions).mean(-1) / scale
+    maps = {"observed": gray / scale, "attached": (facet_normals @ directions.T).T < ATTACHED}
+    return grid, maps, albedo
+
+
+def one_bounce(grid: Subject, observed: np.ndarray, albedo: np.ndarray) -> dict[str, np.ndarray]:
+    """Each reading's one-bounce prediction, ``current`` and ``reversed``: (n, m) over the facets
+    of :func:`attached_facets`.
+
+    Each reading's depth (integrated from the normals; −depth and the half-turned normals for the
+    reversed one) gives Nayar's kernel (:func:`unps.solvers.nayar.interreflection_kernel`, with
+    occlusion); the light facet j sends toward facet i is its ``observed`` grey value, and facet
+    i reflects it with its ``albedo``, the same for both readings. The kernels take most of the
+    time: 0.6–0.7 s for both at 1500 facets on one CPU core where a hollow reading keeps most
+    pairs.
+    """
     depth = np.nan_to_num(integrate_normals(grid.normals, grid.mask))
-    out = {"observed": gray / scale, "attached": (facet_normals @ directions.T).T < ATTACHED}
-    if not readings:
-        return out
-    for reading, z, n in (("current", depth, grid.normals), ("reversed", -depth, grid.normals @ HALF_TURN)):
-        out[reading] = (interreflection_kernel(z, n, grid.mask) @ out["observed"].T).T * albedo[None]
-    return out
+    return {reading: (interreflection_kernel(z, n, grid.mask) @ observed.T).T * albedo[None]
+            for reading, z, n in (("current", depth, grid.normals),
+                                  ("reversed", -depth, grid.normals @ HALF_TURN))}
+
+
+def attached_predictions(subject: Subject, lights: Lights, normals: np.ndarray,
+                         max_facets: int = 1500) -> dict[str, np.ndarray]:
+    """The light in attached shadows and each reading's one-bounce prediction of it: the maps of
+    :func:`attached_facets` and :func:`one_bounce` together."""
+    grid, maps, albedo = attached_facets(subject, lights, normals, max_facets)
+    return maps | one_bounce(grid, maps["observed"], albedo)
 
 
 def explained_share(seen: np.ndarray, predicted: np.ndarray) -> tuple[float, float]:
@@ -269,8 +284,8 @@ def explained_share(seen: np.ndarray, predicted: np.ndarray) -> tuple[float, flo
 
 
 def summarise_attached(maps: dict[str, np.ndarray]) -> AttachedLight:
-    """:class:`AttachedLight` of :func:`attached_predictions`' maps (the shares and scale nan
-    where it left the predictions out)."""
+    """:class:`AttachedLight` of :func:`attached_facets`' maps, with :func:`one_bounce`'s (the
+    shares and scale nan without them)."""
     attached = maps["attached"]
     seen = maps["observed"][attached]
     current = reversed_ = scale = float("nan")
@@ -285,11 +300,11 @@ def attached_light(subject: Subject, lights: Lights, normals: np.ndarray) -> Att
     """:class:`AttachedLight` of the two readings from (H, W, 3) ``normals`` estimated with
     ``lights``; the predictions are left out (shares nan) where too little light or too few
     pairs could point to the reversal anyway."""
-    maps = attached_predictions(subject, lights, normals, readings=False)
+    grid, maps, albedo = attached_facets(subject, lights, normals)
     found = summarise_attached(maps)
     if found.pairs < AttachedLight.MIN_PAIRS or found.level < AttachedLight.MIN_LEVEL:
         return found
-    return summarise_attached(attached_predictions(subject, lights, normals))
+    return summarise_attached(maps | one_bounce(grid, maps["observed"], albedo))
 
 
 @dataclass(frozen=True)
