@@ -131,6 +131,37 @@ def test_a_region_the_images_miss_is_continued_from_the_surface_around_it():
                                   scrambled.astype(np.float32))
 
 
+@pytest.mark.parametrize("seen_from", ["outside", "inside"])
+def test_a_surface_continued_to_the_outline_leans_across_it_as_the_seen_outline_does(seen_from):
+    """A sphere's left cap unseen up to its outline: continued with the occluding contour it comes
+    back within 5°; the least-curved surface alone runs on flat to the outline, 13° off. The same
+    for the sphere seen from inside (a shell, its outline leaning inward)."""
+    sphere, mask, x = sphere_normals(64)
+    if seen_from == "inside":
+        sphere = sphere * [-1, -1, 1]
+    cap = mask & (x < -0.45)
+    start = np.where(cap[..., None], [0.0, 0.0, 1.0], sphere)
+    with_outline = continue_surface(start, mask, cap)
+    without = continue_surface(start, mask, cap, outline=False)
+    assert angular_error(with_outline[cap], sphere[cap]).mean() < 5
+    assert angular_error(without[cap], sphere[cap]).mean() > 10
+    np.testing.assert_array_equal(with_outline[~cap], start[~cap].astype(np.float32))
+
+
+def test_an_outline_that_leans_no_one_way_is_left_alone():
+    """A tilted plane leans outward across one side of its outline and inward across the other:
+    nothing to continue there, and the plane comes back as it is. An outline seen on less than a
+    tenth of its length says nothing either."""
+    _, mask, x = sphere_normals(64)
+    plane = np.broadcast_to(np.array([0.3, 0.2, np.sqrt(0.87)]), mask.shape + (3,))
+    cap = mask & (x < -0.45)
+    assert geometry.outline_normals(plane, mask, cap) is None
+    continued = continue_surface(np.where(cap[..., None], [0.0, 0.0, 1.0], plane), mask, cap)
+    assert angular_error(continued[cap], plane[cap]).max() < 0.1
+    sphere, _, _ = sphere_normals(64)
+    assert geometry.outline_normals(sphere, mask, mask & (x > -0.86)) is None       # 5 % of it seen
+
+
 def test_an_unseen_region_at_the_image_border_is_continued_without_wrapping_around():
     """A bowl z = 0.01·(col² + row²) filling the frame, its last three columns unseen: their
     normals come back from the columns before them (straight on: the bowl's curvature is not

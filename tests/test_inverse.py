@@ -97,6 +97,7 @@ def test_batch_norm_reads_out_with_the_statistics_it_was_fitted_with():
     ("batch_norm", "yes", "preset.batch_norm must be true or false, got 'yes'"),
     ("cast_shadows", 1, "preset.cast_shadows must be true or false, got 1"),
     ("continue_black", "yes", "preset.continue_black must be true or false, got 'yes'"),
+    ("continue_outline", "yes", "preset.continue_outline must be true or false, got 'yes'"),
     ("continue_held", 1.5, "preset.continue_held must be a share in [0, 1], got 1.5"),
     ("continue_held", True, "preset.continue_held must be a share in [0, 1], got True"),
     ("refine_pixels", "no", "preset.refine_pixels must be true or false, got 'no'"),
@@ -676,7 +677,8 @@ def test_interreflection_off_and_in_memory_fits(sphere):
 def test_pixels_black_in_every_image_get_the_surface_continued(caplog):
     """An 8-bit sphere with a band black in all its images: with ``continue_black`` (default) the
     band's normals are the fitted ones continued across it and the rest are the same as without;
-    ``black_share`` is the band's share either way."""
+    ``black_share`` is the band's share either way; ``continue_outline=false`` continues it without
+    the occluding contour where the band meets the outline."""
     sphere = render_lambertian("sphere", size=32, n_lights=12, seed=2)
     images = np.round(sphere.images / sphere.images.max() * 255) / 255
     band = sphere.mask & (np.abs(np.arange(32) - 18) < 3)[None, :]
@@ -691,6 +693,10 @@ def test_pixels_black_in_every_image_get_the_surface_continued(caplog):
     np.testing.assert_allclose(continued.normals[band], expected[band], atol=1e-4)
     assert angular_error(continued.normals[band], plain.normals[band]).mean() > 1
     assert "of the object is black in every image" in caplog.text and "continued" in caplog.text
+    straight = tiny_fit(dark, continue_black=True, continue_outline=False)
+    expected = continue_surface(plain.normals, sphere.mask, band, outline=False)
+    np.testing.assert_allclose(straight.normals[band], expected[band], atol=1e-4)
+    assert angular_error(straight.normals[band], continued.normals[band]).mean() > 0.5
 
 
 def test_a_fit_on_a_coarser_grid_solves_each_pixel_of_the_subject(caplog):

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.ndimage import binary_dilation
+from scipy.ndimage import binary_dilation, binary_erosion, distance_transform_edt, gaussian_filter
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import spsolve
 import torch
@@ -86,16 +86,20 @@ def orientation_equations(normals: np.ndarray, index: np.ndarray, use: np.ndarra
 
 
 def continue_surface(normals: np.ndarray, mask: np.ndarray, unseen: np.ndarray,
-                     smoothness: float = 1.0) -> np.ndarray:
+                     smoothness: float = 1.0, outline: bool = True) -> np.ndarray:
     """``normals`` with the ``unseen`` pixels' replaced by those of the least-curved depth that
     follows the normals between seen neighbours: the surface continued across a region the
     images say nothing about.
 
     The depth z over the mask minimises :func:`integrate_normals`' equations (n̄_z Δz = −n̄_x along
     +col, n̄_z Δz = n̄_y along +row) for pairs of seen pixels, plus ``smoothness``² Σ (second
-    difference of z)² centred on unseen pixels and their neighbours. The unseen pixels' normals
-    are (−∂z/∂x, −∂z/∂y, 1) normalised, from central differences where both neighbours are on the
-    object and one-sided ones elsewhere (+y is −row).
+    difference of z)² centred on unseen pixels and their neighbours. With ``outline``, the
+    unseen pixels on the object's outline also give the same equations for the normal the seen
+    outline gives them (:func:`outline_normals`): a surface continued up to the outline turns
+    away from the camera there as the rest of the outline does, where the least-curved depth
+    alone would run on flat. The unseen pixels' normals are (−∂z/∂x, −∂z/∂y, 1) normalised,
+    from central differences where both neighbours are on the object and one-sided ones
+    elsewhere (+y is −row).
 
     Args:
         normals: (H, W, 3) unit normals.
@@ -129,6 +133,15 @@ def continue_surface(normals: np.ndarray, mask: np.ndarray, unseen: np.ndarray,
         b = index[2 * dr:, 2 * dc:]
         ok = (a >= 0) & (centre >= 0) & (b >= 0) & near[dr: h - dr, dc: w - dc]
         add([a[ok], centre[ok], b[ok]], [smoothness, -2 * smoothness, smoothness], np.zeros(int(ok.sum())))
+    anchored = outline_normals(normals, mask, unseen) if outline else None
+    if anchored is not None:
+        anchors, target = anchored
+        for (dr, dc), component, sign in (((0, 1), 0, -1.0), ((1, 0), 1, 1.0)):
+            a, b = index[: h - dr, : w - dc], index[dr:, dc:]
+            first_anchored = anchors[: h - dr, : w - dc]
+            ok = (a >= 0) & (b >= 0) & (first_anchored | anchors[dr:, dc:])
+            pair = np.where(first_anchored[..., None], target[: h - dr, : w - dc], target[dr:, dc:])[ok]
+            add([b[ok], a[ok]], [pair[:, 2], -pair[:, 2]], sign * pair[:, component])
     m = int(mask.sum())
     system = sp.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))),
                            shape=(sum(len(r) for r in rhs), m))
@@ -147,6 +160,75 @@ def continue_surface(normals: np.ndarray, mask: np.ndarray, unseen: np.ndarray,
     continued /= np.linalg.norm(continued, axis=-1, keepdims=True)
     out[unseen] = continued[unseen]
     return out
+
+
+OUTLINE_SEEN_SHARE = 0.1
+"""The share of the outline that must be seen for :func:`outline_normals` to read it."""
+OUTLINE_AGREEMENT = 0.75
+"""The share of the seen outline whose normals must lean the same way across it (outward, as a
+solid's, or inward, as a shell's seen from inside) for :func:`outline_normals` to continue it."""
+
+
+def outline_normals(normals: np.ndarray, mask: np.ndarray, unseen: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The unseen part of an object's outline, and the normal each of its pixels is given: the
+    seen outline's, in the outline's own frame.
+
+    On the outline of a solid seen whole the surface turns away from the camera (the occluding
+    contour): its normal leans outward across the outline (:func:`outward_directions`), tilted
+    toward the camera only as far as a pixel's centre lies inside the outline. A shell seen from
+    inside leans inward there, a rim can face the camera. The seen outline pixels say which and
+    how far: each unseen one gets their median lean across the outline (n·outward) and their
+    median n_z, along its own outward direction. Where the seen outline does not lean one way
+    (less than :data:`OUTLINE_AGREEMENT` of it on the median's side, as on a plane tilted away
+    from the camera) or too little of it is seen, nothing is given. The outline is the object's
+    pixels with a neighbour (of eight) off the object inside the frame: an object cut by the
+    frame's edge has no outline there.
+
+    Args:
+        normals: (H, W, 3) unit normals; mask, unseen: (H, W) bool, ``unseen`` inside ``mask``.
+
+    Returns:
+        (H, W) bool, the unseen outline pixels, and (H, W, 3) unit normals (valid there); None
+        where no unseen pixel is on the outline, less than :data:`OUTLINE_SEEN_SHARE` of the
+        outline is seen or the seen part does not agree.
+
+    >>> r, c = np.mgrid[-6:7, -6:7]
+    >>> disc = np.hypot(r, c) <= 5.5
+    >>> sphere = np.stack([c, -r, np.sqrt(np.clip(36 - r ** 2 - c ** 2, 0, None))], -1) / 6
+    >>> anchors, target = outline_normals(sphere, disc, disc & (c < -3))    # its left side unseen
+    >>> int(anchors.sum()), (np.round(target[6, 0], 2) + 0).tolist()        # the leftmost pixel faces left
+    (9, [-0.83, 0.0, 0.56])
+    """
+    edge = mask & ~binary_erosion(mask, np.ones((3, 3), bool), border_value=1)
+    seen = edge & ~unseen
+    anchors = edge & unseen
+    if not anchors.any() or seen.sum() < OUTLINE_SEEN_SHARE * edge.sum():
+        return None
+    outward = outward_directions(mask)
+    lean = (normals[..., :2] * outward).sum(-1)[seen]
+    across = float(np.median(lean))
+    if np.mean(np.sign(lean) == np.sign(across)) < OUTLINE_AGREEMENT:
+        return None
+    nz = float(np.median(normals[seen][:, 2]))
+    target = np.concatenate([across * outward, np.full(mask.shape + (1,), nz)], -1)
+    return anchors, target / np.maximum(np.linalg.norm(target, axis=-1, keepdims=True), 1e-12)
+
+
+def outward_directions(mask: np.ndarray) -> np.ndarray:
+    """(H, W, 2) unit (x, y) directions out of the object, across its outline: the negated
+    gradient of the signed distance to the outline, smoothed over a pixel so that a staircase
+    outline reads as the line it samples.
+
+    >>> square = np.zeros((7, 7), bool); square[1:6, 1:6] = True
+    >>> outward = np.round(outward_directions(square), 3) + 0
+    >>> outward[3, 1].tolist(), outward[1, 3].tolist()         # the left side, the top
+    ([-1.0, 0.0], [0.0, 1.0])
+    """
+    signed = distance_transform_edt(mask) - distance_transform_edt(~mask)
+    d_row, d_col = np.gradient(gaussian_filter(signed.astype(np.float64), 1.0))
+    outward = np.stack([-d_col, d_row], -1)                         # x = +col, y = −row
+    return outward / np.maximum(np.linalg.norm(outward, axis=-1, keepdims=True), 1e-12)
 
 
 def depth_to_mesh(depth: np.ndarray, mask: np.ndarray, frame: Frame | None = None

@@ -138,7 +138,7 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
                      "its normals are taken %.0f%% of the way to the surface continued from the pixels "
                      "around it (preset.continue_held)", 100 * held_share, 100 * preset.continue_held)
         normals = with_surface_continued(normals, cropped.mask, black if preset.continue_black else none,
-                                         unlit_held, preset.continue_held)
+                                         unlit_held, preset.continue_held, preset.continue_outline)
         normals, albedo = on_subject_grid(normals, cropped, subject, directions, scales)
     black_share = float(black.sum() / cropped.mask.sum())
     if black.any():
@@ -259,7 +259,7 @@ def with_highlights(cropped: Subject, normals: np.ndarray, directions: np.ndarra
 
 
 def with_surface_continued(normals: np.ndarray, mask: np.ndarray, black: np.ndarray, held: np.ndarray,
-                           share: float) -> np.ndarray:
+                           share: float, outline: bool = True) -> np.ndarray:
     """``normals`` (H, W, 3) with the surface continued (:func:`unps.geometry.continue_surface`)
     across the ``black`` pixels, and the ``held`` ones taken ``share`` of the way from their
     normals to the surface continued across ``held | black`` (the normalised blend).
@@ -270,10 +270,12 @@ def with_surface_continued(normals: np.ndarray, mask: np.ndarray, black: np.ndar
     Args:
         mask, black, held: (H, W) bool; ``black`` and ``held`` inside ``mask`` and apart.
         share: in [0, 1].
+        outline: the continued surface turns away at the object's outline as the seen outline
+            does (``preset.continue_outline``; :func:`unps.geometry.outline_normals`).
     """
-    out = continue_surface(normals, mask, black) if black.any() else normals.copy()
+    out = continue_surface(normals, mask, black, outline=outline) if black.any() else normals.copy()
     if held.any() and share > 0:
-        surface = continue_surface(normals, mask, held | black)[held]
+        surface = continue_surface(normals, mask, held | black, outline=outline)[held]
         out[held] = unit((1 - share) * normals[held] + share * surface)
     return out
 

@@ -40,6 +40,10 @@ class Preset:
             that the fit held toward N_init (``dark_hold``; :func:`unps.inverse.fit.held_from_solve`)
             and no highlight lights are taken this share of the way (in [0, 1]; 0: not at all) to
             the surface continued across them: their images pin them no better than N_init does.
+        continue_outline: beyond the paper, the surface continued across black and held pixels
+            turns away from the camera where it reaches the object's outline, as the seen part of
+            the outline does (:func:`unps.geometry.outline_normals`: the occluding contour); false:
+            the least-curved surface runs on up to the outline.
         refine_pixels: beyond the paper, a fit on a coarser working grid has each pixel's normal
             on the subject's grid solved against its own images under the fitted reflectance
             (:func:`unps.inverse.pixels.refine_pixel_normals`), unless the images are too noisy
@@ -69,6 +73,7 @@ class Preset:
     init: str = "robust"
     continue_black: bool = True
     continue_held: float = 0.25
+    continue_outline: bool = True
     refine_pixels: bool = True
     highlights: bool = True
     precision: str = "auto"
@@ -87,7 +92,8 @@ class Preset:
         if self.precision not in PRECISIONS:
             raise InputError(f"preset.precision must be one of {', '.join(PRECISIONS)}, "
                              f"got {self.precision!r}")
-        for name in ("batch_norm", "cast_shadows", "continue_black", "refine_pixels", "highlights"):
+        for name in ("batch_norm", "cast_shadows", "continue_black", "continue_outline", "refine_pixels",
+                     "highlights"):
             if not isinstance(getattr(self, name), bool):
                 raise InputError(f"preset.{name} must be true or false, got {getattr(self, name)!r}")
 
