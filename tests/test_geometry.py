@@ -151,7 +151,7 @@ def test_a_surface_continued_to_the_outline_leans_across_it_as_the_seen_outline_
 def test_an_outline_that_leans_no_one_way_is_left_alone():
     """A tilted plane leans outward across one side of its outline and inward across the other:
     nothing to continue there, and the plane comes back as it is. An outline seen on less than a
-    tenth of its length says nothing either."""
+    tenth of its length says nothing either, nor one whose normals face away from the camera."""
     _, mask, x = sphere_normals(64)
     plane = np.broadcast_to(np.array([0.3, 0.2, np.sqrt(0.87)]), mask.shape + (3,))
     cap = mask & (x < -0.45)
@@ -160,6 +160,8 @@ def test_an_outline_that_leans_no_one_way_is_left_alone():
     assert angular_error(continued[cap], plane[cap]).max() < 0.1
     sphere, _, _ = sphere_normals(64)
     assert geometry.outline_normals(sphere, mask, mask & (x > -0.86)) is None       # 5 % of it seen
+    away = sphere * [1, 1, -1]                    # the seen outline facing away from the camera: noise
+    assert geometry.outline_normals(away, mask, cap) is None
 
 
 def test_an_unseen_region_at_the_image_border_is_continued_without_wrapping_around():

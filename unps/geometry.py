@@ -181,9 +181,10 @@ def outline_normals(normals: np.ndarray, mask: np.ndarray, unseen: np.ndarray
     how far: each unseen one gets their median lean across the outline (n·outward) and their
     median n_z, along its own outward direction. Where the seen outline does not lean one way
     (less than :data:`OUTLINE_AGREEMENT` of it on the median's side, as on a plane tilted away
-    from the camera) or too little of it is seen, nothing is given. The outline is the object's
-    pixels with a neighbour (of eight) off the object inside the frame: an object cut by the
-    frame's edge has no outline there.
+    from the camera), too little of it is seen, or its median normal faces away from the camera
+    (n_z ≤ 0: no surface the camera sees does; the fit there is noise), nothing is given. The
+    outline is the object's pixels with a neighbour (of eight) off the object inside the frame:
+    an object cut by the frame's edge has no outline there.
 
     Args:
         normals: (H, W, 3) unit normals; mask, unseen: (H, W) bool, ``unseen`` inside ``mask``.
@@ -191,7 +192,7 @@ def outline_normals(normals: np.ndarray, mask: np.ndarray, unseen: np.ndarray
     Returns:
         (H, W) bool, the unseen outline pixels, and (H, W, 3) unit normals (valid there); None
         where no unseen pixel is on the outline, less than :data:`OUTLINE_SEEN_SHARE` of the
-        outline is seen or the seen part does not agree.
+        outline is seen, the seen part does not agree or faces away.
 
     >>> r, c = np.mgrid[-6:7, -6:7]
     >>> disc = np.hypot(r, c) <= 5.5
@@ -211,6 +212,8 @@ def outline_normals(normals: np.ndarray, mask: np.ndarray, unseen: np.ndarray
     if np.mean(np.sign(lean) == np.sign(across)) < OUTLINE_AGREEMENT:
         return None
     nz = float(np.median(normals[seen][:, 2]))
+    if nz <= 0:              # facing away from the camera: what the fit has there is noise
+        return None
     target = np.concatenate([across * outward, np.full(mask.shape + (1,), nz)], -1)
     return anchors, target / np.maximum(np.linalg.norm(target, axis=-1, keepdims=True), 1e-12)
 
