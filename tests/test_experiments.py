@@ -11,7 +11,7 @@ from hydra import compose, initialize_config_module
 from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
 from hydra.core.override_parser.overrides_parser import OverridesParser
 
-from conftest import load_script
+from conftest import diligent_object, load_script
 from unps.data.analytic import render_lambertian
 from unps.data.diligent import find_diligent_object, read_diligent, read_diligent_object
 from unps.data.writer import write_diligent
@@ -553,6 +553,23 @@ def test_selfcal_steps_stops_each_trace_where_its_lights_settle():
     assert lines[0].split()[:6] == ["settle", "1°:", "5.25°", "ratio", "0.875", "steps"]
     assert "steps    250" in lines[0] and "raised >1°:  1" in lines[0] and "worst +2.00° (moving)" in lines[0]
     assert "0 above, 0 below, worst +0.10°" in lines[0] and "steps    300" in lines[1]
+
+
+def test_outline_ring_splits_the_error_by_distance_to_the_outline(tmp_path, capsys):
+    """DiLiGenT's ball with its true normals and its outermost ring turned to face the camera: the
+    ring holds all of the error, the bands further in none; a missing fit is named."""
+    study = load_script("calibrated_outline_ring", "experiments/calibrated/outline_ring.py")
+    diligent = diligent_object("pmsData/ballPNG").parents[1]
+    ball = study.truth("ball", diligent, tmp_path, tmp_path)
+    ring = ball.mask & (study.outline_distance(ball.mask) <= 1)
+    normals = np.where(ring[..., None], [0.0, 0.0, 1.0], ball.normals)
+    (tmp_path / "ball-unps").mkdir()
+    np.save(tmp_path / "ball-unps" / "normals.npy", normals)
+    study.main(["--runs", str(tmp_path), "--objects", "ball", "--diligent", str(diligent)])
+    line = capsys.readouterr().out.splitlines()[-1]
+    assert "(0,1]" in line and "100.0%" in line and " 0.0° " in line.split("|")[2]
+    with pytest.raises(SystemExit, match="cat-unps/normals.npy: not found"):
+        study.main(["--runs", str(tmp_path), "--objects", "cat", "--diligent", str(diligent)])
 
 
 def test_grid_floor_names_a_missing_diligent_folder(tmp_path, capsys):
