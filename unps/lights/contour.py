@@ -18,10 +18,11 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-from scipy.ndimage import binary_erosion, gaussian_filter
+from scipy.ndimage import binary_erosion
 
 from unps.data.lights import Verdict
 from unps.data.subject import Subject
+from unps.geometry import outward_directions
 from unps.lights import Lights, with_lights
 from unps.metrics import angular_error
 from unps.solvers.rpca import robust_init
@@ -32,28 +33,24 @@ MIN_ROTATION = 5.0          # degrees: smaller rotations are within the estimate
 MAX_ROTATION = 45.0         # degrees: larger ones are the outline's error, not the estimate's
 
 
-def outward_normals(mask: np.ndarray, band: int = 2, smoothing: float = 2.0
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def outward_normals(mask: np.ndarray, band: int = 2) -> tuple[np.ndarray, np.ndarray]:
     """The occluding contour's pixels and the normals a smooth surface has there.
 
     Args:
         mask: (H, W) bool object mask.
         band: width in pixels of the contour band inside the mask.
-        smoothing: σ in pixels of the Gaussian that gives the outline's direction.
 
     Returns:
         (H, W) bool, the band's pixels, leaving out those within ``band`` of the image border
         (an object cut by the frame has no contour there); (H, W, 3) unit normals
-        (outward direction in the image plane, z = 0).
+        (:func:`unps.geometry.outward_directions` in the image plane, z = 0).
     """
     band_pixels = mask & ~binary_erosion(mask, iterations=band, border_value=1)
     inner = np.zeros_like(mask)
     inner[band:-band, band:-band] = True
-    gy, gx = np.gradient(gaussian_filter(mask.astype(np.float64), smoothing))   # rows down
-    outward = np.stack([-gx, gy, np.zeros_like(gx)], -1)
-    length = np.linalg.norm(outward, axis=-1)
-    outward /= np.maximum(length, 1e-12)[..., None]
-    return band_pixels & inner & (length > 1e-6), outward
+    across = outward_directions(mask)
+    outward = np.concatenate([across, np.zeros(mask.shape + (1,))], -1)
+    return band_pixels & inner & (np.linalg.norm(across, axis=-1) > 0.5), outward
 
 
 def contour_rotation(normals: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray | None, str]:
