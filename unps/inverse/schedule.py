@@ -19,8 +19,9 @@ class Schedule:
         normal_lr: learning rate of the estimation branch ξ_f, ξ_n1; None = ``lr`` (the paper
             used 8e-5 on its own dataset).
         lr_drop_at: the step after which every learning rate is divided by 10 (900).
-        input_noise_var: variance of the Gaussian noise added to f_sp's image input (0.1), on
-            images scaled to [0, ~1] (their 99th percentile over the object is 1).
+        input_noise_var: variance of the Gaussian noise added to f_sp's image input (0.1, the
+            supplementary's; the fast preset's 0.05), on images scaled to [0, ~1] (their 99th
+            percentile over the object is 1).
         images_per_step: images rendered per step; None = all of them.
         pixel_keep: fraction of object pixels in each step's loss (Taniai & Maehara: 0.1).
         prior_weight: weight of the prior ‖N_o − N_init‖² toward the robust initialisation.
