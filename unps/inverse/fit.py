@@ -116,14 +116,15 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
         directions, scales = rendering["light_directions"], rendering["light_scales"]
         image_noise = None
         held = held_from_solve(system, work.mask, cropped.mask.shape, factor)
-        interreflected = upsample_map(pseudo_normals - normals, work.mask, cropped.mask.shape, factor)
         if factor > 1:
             fine_init = initial_estimate(cropped, light_directions, preset.init, device).normals
-            normals = upsample_with_detail(normals, coarse_init, fine_init, work.mask, factor)
-        if preset.refine_pixels:
-            normals, image_noise = solved_per_pixel(cropped, normals, interreflected,
-                                                    rendering["reflectance"], directions, scales,
-                                                    work.mask, factor, ~clipped, held)
+            upsampled = upsample_with_detail(normals, coarse_init, fine_init, work.mask, factor)
+            if preset.refine_pixels:
+                interreflected = upsample_map(pseudo_normals - normals, work.mask, cropped.mask.shape, factor)
+                upsampled, image_noise = solved_per_pixel(cropped, upsampled, interreflected,
+                                                          rendering["reflectance"], directions, scales,
+                                                          work.mask, factor, ~clipped, held)
+            normals = upsampled
         highlight_share, highlit = None, np.zeros_like(black)
         if preset.highlights:
             normals, highlit = with_highlights(cropped, normals, directions, scales, black)
