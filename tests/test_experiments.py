@@ -461,6 +461,42 @@ def test_error_by_angle_splits_the_mean_into_bands_that_add_up():
     assert rows[5][1:] == (0.2, 40.0, 8.0)
 
 
+def test_last_steps_averages_the_normals_of_each_window_of_the_last_steps(capsys):
+    """N_o that swings ±10° about the truth from step to step is 10° off at every step, and its
+    unit mean over an even number of the last steps is on the truth; steps before the longest
+    window are not read."""
+    study = load_script("calibrated_last_steps", "experiments/calibrated/last_steps.py")
+    import torch
+
+    tilt = np.radians(10.0)
+    truth = torch.tensor([0.0, 0.0, 1.0]).view(1, 3, 1, 1).expand(1, 3, 4, 4)
+
+    class Module:
+        true_normals, step = truth, 0
+
+        def normals(self):
+            side = 1.0 if self.step % 2 else -1.0
+            n = torch.tensor([side * np.sin(tilt), 0.0, np.cos(tilt)], dtype=torch.float32)
+            return n.view(1, 3, 1, 1).expand(1, 3, 4, 4), None
+
+        def normal_mae(self, normals):
+            cos = (normals * self.true_normals).sum(1).clamp(-1, 1)
+            return torch.rad2deg(torch.acos(cos)).mean()
+
+    class Trainer:
+        max_steps, global_step = 400, 0
+
+    callback, trainer, module = study.LastSteps(), Trainer(), Module()
+    for step in range(1, 401):
+        trainer.global_step = module.step = step
+        callback.on_train_batch_end(trainer, module, None, None, 0)
+    callback.on_train_end(trainer, module)
+    assert len(callback.errors) == 300
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[0].endswith("mean 10.00°, lowest 10.00°, highest 10.00°, last 10.00°")
+    assert [line.split(": ")[1] for line in printed[1:]] == ["0.40°", "0.00°", "0.00°", "0.00°", "0.00°"]
+
+
 def test_light_moves_splits_a_move_of_the_lights_into_a_common_turn_and_the_rest(capsys):
     study = load_script("lb_light_moves", "experiments/light_benchmark/light_moves.py")
     truth = render_lambertian("sphere", size=8, n_lights=12, seed=1).light_directions
