@@ -30,7 +30,7 @@ def report_noise(runs: Sequence[Run], out: Path) -> tuple[str, list[Path]]:
                   "too):\n\n" + markdown_table(header, light_rows))
 
     plt = pyplot()
-    fig, ax = plt.subplots(figsize=(5.5, 3.6))
+    fig, ax = plt.subplots(figsize=(6.2, 3.6))
     for s in subjects:
         ax.plot(sigmas, [grid[s, sigma] if grid[s, sigma] is not None else np.nan for sigma in sigmas],
                 "o-", lw=1, ms=3, label=s)
@@ -43,6 +43,6 @@ def report_noise(runs: Sequence[Run], out: Path) -> tuple[str, list[Path]]:
         axis_format(matplotlib.ticker.FormatStrFormatter("%g"))
     ax.set_xticks(sigmas)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))   # beside: no curve hidden
     ax.set_title("MAE against image noise (supplementary Fig. 2)")
     return table, [save(fig, out / "noise.png")]
