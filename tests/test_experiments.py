@@ -696,3 +696,35 @@ def test_light_stage_timing_refuses_no_rounds_before_it_makes_anything(tmp_path,
         light_stages.main(["--before", "HEAD", "--rounds", "0", "--out", str(tmp_path / "runs")])
     assert "--rounds must be at least 1, got 0" in capsys.readouterr().err
     assert not (tmp_path / "runs").exists()
+
+
+def test_integrability_study_finds_the_frame_of_a_lambertian_surface_up_to_its_bas_relief():
+    """Images of a smooth Lambertian surface (no shadows) are rank 3; the integrability constraint on
+    their low-rank normals gives the frame the true lights give, the lights it leads to are a
+    bas-relief of the truth, and the nearest bas-relief reaches a reading inside out."""
+    study = load_script("lb_integrability", "experiments/light_benchmark/integrability.py")
+    rows, cols = np.mgrid[0:48, 0:48] / 47.0
+    depth = 6 * np.exp(-((cols - 0.4) ** 2 + (rows - 0.5) ** 2) / 0.08) + 3 * np.sin(3 * cols) * rows
+    slope_x, slope_y = np.gradient(depth, axis=1), -np.gradient(depth, axis=0)      # y up
+    normals = study.unit(np.stack([-slope_x, -slope_y, np.ones_like(depth)], -1))
+    albedo = 0.6 + 0.3 * cols
+    rng = np.random.default_rng(1)
+    polar, azimuth = np.radians(rng.uniform(5, 25, 20)), rng.uniform(0, 2 * np.pi, 20)
+    truth = np.stack([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), np.cos(polar)], 1)
+    mask = np.ones(depth.shape, bool)
+    gray = (albedo[..., None] * normals)[mask] @ truth.T                               # (m, n)
+    assert gray.min() > 0                                                               # no shadow
+    scaled, images_lights = study.rank3(gray)
+    true_frame = np.linalg.inv(np.linalg.lstsq(images_lights, truth, rcond=None)[0]).T
+    grid = np.zeros(depth.shape + (3,))
+    grid[mask] = scaled
+    c = study.null_vector(study.constraint_rows(grid, mask))
+    assert abs(c @ study.constraint_of(true_frame)) > 0.999
+    assert abs(study.constraint_of(study.frame_from(c)) @ c) == pytest.approx(1.0)
+    integrable = images_lights @ np.linalg.inv(study.frame_from(c)).T
+    def degrees(a, b):
+        return np.degrees(np.arccos(np.clip((study.unit(a) * b).sum(1), -1, 1))).mean()
+    assert degrees(integrable, truth) > 5                                               # some bas-relief of it …
+    assert degrees(study.nearest_bas_relief(integrable, truth), truth) < 0.5            # … and only that
+    inside_out = truth * [-1, -1, 1]
+    assert degrees(study.nearest_bas_relief(truth, inside_out), inside_out) < 0.01
