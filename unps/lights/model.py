@@ -157,17 +157,6 @@ class SelfCalibrationModel(nn.Module):
         a = torch.cat([self.columns, third[:, None]], 1)
         return a / torch.det(a).abs().pow(1 / 3)
 
-    def bas_relief(self) -> torch.Tensor:
-        """(3, 3) G = [[1, 0, μ], [0, 1, ν], [0, 0, λ]]: the frame is [c_x | c_y | e_z]·G, scaled."""
-        mu, nu, lam = self.gbr
-        zero, one = torch.zeros_like(mu), torch.ones_like(mu)
-        return torch.stack([torch.stack([one, zero, mu]), torch.stack([zero, one, nu]),
-                            torch.stack([zero, zero, lam])])
-
-    def turn(self) -> torch.Tensor:
-        """(3, 3) [c_x | c_y | e_z]: the frame's part that the depth's integrability pins."""
-        return torch.cat([self.columns, self.view[:, None]], 1)
-
     def lights(self) -> tuple[torch.Tensor, torch.Tensor]:
         """(n, 3) unit directions and (n,) intensities with geometric mean 1."""
         scaled = (self.scaled_lights + self.light_residual) @ self.frame()

@@ -24,7 +24,6 @@ Frame: x right (+col), y up (−row), z toward the camera; orthographic view alo
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import time
 from collections.abc import Callable
@@ -33,7 +32,6 @@ from typing import ClassVar
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from unps.data.checks import black_everywhere, first_level
 from unps.data.lights import Verdict
@@ -88,12 +86,6 @@ class SelfCalibration:
             per channel, and a fit that cannot correct them moves the directions to absorb what
             it cannot render (a matte sphere's 12 network lights: moved 1.03° and 2.56° →
             2.82° off with one scale per image).
-        pull_past: what of the shared frame the pull toward the first guess lets go: ``none``;
-            ``bas_relief``, the pull read on the lights with the fit's own (μ, ν, λ) undone, so
-            that only the images and ``gbr_weight`` hold the bas-relief; ``frame``, the pull
-            toward the first guess carried through the fit's own c_x, c_y, which the depth's
-            integrability pins (measured on the light benchmark, not kept:
-            ``experiments/light_benchmark/README.md``).
         lr: learning rate of depth, albedo and lobes.
         lr_lights: learning rate of the light frame and per-light residuals.
         residual_weight: weight of the mean squared per-light residual |ε_i|².
@@ -117,7 +109,6 @@ class SelfCalibration:
     censor_black: bool = True
     hold_frame: bool = False
     fit_colour: bool = True
-    pull_past: str = "none"
     lr: float = 0.01
     lr_lights: float = 0.003
     residual_weight: float = 0.1
@@ -327,19 +318,6 @@ def objective(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfC
             + settings.gbr_weight * (mu ** 2 + nu ** 2 + (lam - 1) ** 2))
 
 
-def pull_on(model: SelfCalibrationModel, prior: NetworkPrior, past: str) -> torch.Tensor:
-    """The prior's pull on the model's lights, past what ``past`` lets go of the shared frame
-    (:class:`SelfCalibration`'s ``pull_past``)."""
-    directions, intensities = model.lights()
-    if past == "bas_relief":
-        directions = F.normalize(directions @ torch.linalg.inv(model.bas_relief()), dim=-1)
-    elif past == "frame":
-        prior = dataclasses.replace(prior, directions=F.normalize(prior.directions @ model.turn(), dim=-1))
-    elif past != "none":
-        raise InputError(f"light.selfcal.pull_past must be none, bas_relief or frame, got {past!r}")
-    return prior.cost(directions, intensities)
-
-
 def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibration,
         prior: NetworkPrior | None = None, weight: torch.Tensor | None = None,
         ceiling: torch.Tensor | None = None,
@@ -373,8 +351,7 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
     black = None if ceiling is None else BlackValues.of(target, ceiling)
 
     def total(visible: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
-        pull = pull_on(model, prior, settings.pull_past) if prior is not None else \
-            torch.zeros((), device=target.device)
+        pull = prior.cost(*model.lights()) if prior is not None else torch.zeros((), device=target.device)
         return objective(model, target, settings, visible, weight, black) + pull, pull
 
     read, step = None, 0
