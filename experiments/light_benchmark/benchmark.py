@@ -231,7 +231,9 @@ def main():
                         help="as light.stages (default: light=selfcal's)")
     parser.add_argument("--set", dest="settings", nargs="*", default=[],
                         help="light.<key>=<value> overrides, e.g. selfcal.steps=1000")
-    parser.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's)")
+    parser.add_argument("--threads", type=int, default=1,
+                        help="torch threads (default 1, as the other studies: two runs side by side at "
+                             "torch's default of one thread per core took 60 times as long a case)")
     parser.add_argument("--list", action="store_true", help="print the objects as a Markdown table and stop")
     parser.add_argument("--verbose", action="store_true")
     args = parser.parse_args()
@@ -240,9 +242,8 @@ def main():
         return
     logging.basicConfig(level=logging.INFO if args.verbose else logging.ERROR,
                         format="%(name)s: %(message)s")
-    if args.threads:
-        import torch
-        torch.set_num_threads(args.threads)
+    import torch
+    torch.set_num_threads(args.threads)
     from hydra.errors import ConfigCompositionException
     try:
         source, stage_names = light_source(args.stages, args.settings)
