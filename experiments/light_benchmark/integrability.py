@@ -114,6 +114,8 @@ def nearest_bas_relief(lights: np.ndarray, target: np.ndarray) -> np.ndarray:
 
 
 def run_case(subject, network) -> dict:
+    """The case's figures (module docstring): the mean direction errors of the network's lights,
+    of the orbit's and the frame's, and of the rank-3 lights; the frame's |cos|."""
     lights = network(subject)
     truth = subject.light_directions.astype(np.float64)
     true_scaled = truth * (subject.light_intensities.mean(1)[:, None]
@@ -133,6 +135,7 @@ def run_case(subject, network) -> dict:
 
 
 def report(rows: dict) -> str:
+    """Per case, then per group and light set: the figures of :func:`run_case`."""
     lines = [f"{'group':<9} {'case':<11} {'set':>3} {'network':>8} {'orbit':>7} {'rank 3':>7} "
              f"{'|cos|':>6} {'frame':>7}"]
     for (group, name, label), r in rows.items():
