@@ -1,3 +1,4 @@
+import doctest
 import json
 import os
 import subprocess
@@ -728,3 +729,28 @@ def test_integrability_study_finds_the_frame_of_a_lambertian_surface_up_to_its_b
     assert degrees(study.nearest_bas_relief(integrable, truth), truth) < 0.5            # … and only that
     inside_out = truth * [-1, -1, 1]
     assert degrees(study.nearest_bas_relief(truth, inside_out), inside_out) < 0.01
+
+
+def test_light_parts_measures_the_intensity_error_and_swaps_only_the_lights_files(tmp_path):
+    """The intensity error ignores a common scale; a smooth brightening across the dome is all
+    'linear', one light by light hardly any; a mixed capture reads as the original but for its lights."""
+    study = load_script("lb_light_parts", "experiments/light_benchmark/light_parts.py")
+    assert doctest.testmod(study).failed == 0   # the errors, the shares and the summary's means
+    sphere = render_lambertian("sphere", size=32, n_lights=24, seed=3)
+    directions, true = sphere.light_directions, sphere.light_intensities
+    assert study.intensity_error(3 * true, true) == pytest.approx(0, abs=1e-6)
+    assert study.intensity_error(true * np.tile([1.1, 0.9], 12)[:, None], true) == pytest.approx(0.1, rel=0.02)
+    smooth = true * np.exp(directions @ np.array([0.2, -0.3, 0.5]))[:, None]
+    assert study.linear_share(directions, smooth, true) == pytest.approx(1, abs=1e-6)
+    jitter = true * np.exp(np.random.default_rng(0).normal(0, 0.1, (24, 1)))
+    assert study.linear_share(directions, jitter, true) < 0.4
+    write_diligent(sphere, tmp_path / "capture")
+    other = directions[::-1].copy()
+    mixed = study.mixed_capture(tmp_path / "capture", other, smooth, tmp_path / "mixed")
+    original, swapped = read_diligent(tmp_path / "capture"), read_diligent(mixed)
+    np.testing.assert_allclose(swapped.light_directions, other, atol=1e-6)
+    assert study.intensity_error(swapped.light_intensities, smooth) == pytest.approx(0, abs=1e-6)
+    np.testing.assert_allclose(swapped.images * swapped.light_intensities[:, None, None, :],
+                               original.images * original.light_intensities[:, None, None, :], atol=1e-5)
+    assert all((mixed / f.name).is_symlink() for f in (tmp_path / "capture").iterdir()
+               if not f.name.startswith("light_"))
