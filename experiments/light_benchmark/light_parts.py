@@ -25,13 +25,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import sys
 from pathlib import Path
 
 import numpy as np
-import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import normals  # noqa: E402
@@ -187,8 +184,7 @@ def main(argv=None) -> None:
     except ValueError as e:
         parser.error(str(e))
 
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, "
-          f"{'CUDA' if torch.cuda.is_available() else 'CPU'}; torch {torch.__version__}")
+    print(normals.machine_line())
     print(f"\nlight benchmark objects, {args.lights} lights: the lights the uncalibrated fit ended with "
           f"({args.uncal}), taken apart (normal MAE °; light=gt with the files replaced)")
     print(f"{'object':<12}{'dir err':>8}{'int err':>8}{'linear':>8}{'true':>8}"

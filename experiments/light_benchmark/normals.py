@@ -143,6 +143,12 @@ def storage_means(storages: list[str], errors: dict[str, list[float]]) -> list[s
     return lines
 
 
+def machine_line() -> str:
+    """The line a table of runs starts with: the machine, its cores and torch."""
+    return (f"machine: {platform.machine()}, {os.cpu_count()} cores, "
+            f"{'CUDA' if torch.cuda.is_available() else 'CPU'}; torch {torch.__version__}")
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
@@ -173,8 +179,7 @@ def main(argv=None) -> None:
     except ValueError as e:
         parser.error(str(e))
 
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, "
-          f"{'CUDA' if torch.cuda.is_available() else 'CPU'}; torch {torch.__version__}")
+    print(machine_line())
     print(f"\nlight benchmark objects, {args.lights} lights, light={args.light}"
           f"{' ' + ' '.join(args.settings) if args.settings else ''} (normal MAE °)")
     header = f"{'object':<16}{'storage':>8}" + "".join(f"{m:>9}" for m in args.methods)
