@@ -754,3 +754,23 @@ def test_light_parts_measures_the_intensity_error_and_swaps_only_the_lights_file
                                original.images * original.light_intensities[:, None, None, :], atol=1e-5)
     assert all((mixed / f.name).is_symlink() for f in (tmp_path / "capture").iterdir()
                if not f.name.startswith("light_"))
+
+
+def test_operation_profile_names_each_convolution_shape_and_pass(capsys, tmp_path):
+    """experiments/speed/ops.py: forward and backward convolutions by shape, per step, largest
+    first, with their share of all the profiled time; other operations left out; --steps 1 refused."""
+    from types import SimpleNamespace as Event
+    ops = load_script("speed_ops", "experiments/speed/ops.py")
+    assert doctest.testmod(ops).failed == 0
+    events = [Event(key="aten::convolution_backward", self_cpu_time_total=3000.0,
+                    input_shapes=[[1, 48, 9, 9], [1, 289, 9, 9], [48, 289, 1, 1], [], []]),
+              Event(key="aten::mkldnn_convolution", self_cpu_time_total=1000.0,
+                    input_shapes=[[1, 289, 9, 9], [48, 289, 1, 1], [48]]),
+              Event(key="aten::leaky_relu", self_cpu_time_total=1000.0, input_shapes=[[1, 48, 9, 9]])]
+    assert ops.convolution_rows(events, steps=100) == [
+        ("in (1, 289, 9, 9) → 48, 1×1", "backward", 0.03, 0.6),
+        ("in (1, 289, 9, 9) → 48, 1×1", "forward", 0.01, 0.2)]
+    with pytest.raises(SystemExit):
+        ops.main(["--steps", "1", "--out", str(tmp_path / "runs")])
+    assert "--steps must be at least 2, got 1" in capsys.readouterr().err
+    assert not (tmp_path / "runs").exists()

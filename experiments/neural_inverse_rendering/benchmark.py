@@ -161,7 +161,8 @@ def main():
     parser.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
                         help="Hydra overrides for every unps row, e.g. preset.input_noise_var=0.3")
     args = parser.parse_args()
-    device = torch.cuda.get_device_name() if torch.cuda.is_available() else "CPU"
+    device = (torch.cuda.get_device_name() if torch.cuda.is_available()
+              else f"CPU ({torch.backends.cpu.get_cpu_capability()})")
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, {device}; "
           f"torch {torch.__version__}")
     if args.only in (None, "diligent"):
