@@ -25,8 +25,8 @@ from torch.profiler import ProfilerActivity, profile
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import stages  # noqa: E402  (this folder's stage profiler)
 
-CONVOLUTIONS = {"aten::mkldnn_convolution": "forward", "aten::convolution_backward": "backward",
-                "aten::_slow_conv2d_forward": "forward", "aten::thnn_conv2d": "forward"}
+CONVOLUTIONS = {"aten::mkldnn_convolution": "forward", "aten::_slow_conv2d_forward": "forward",
+                "aten::convolution_backward": "backward"}
 
 
 def convolution_rows(events, steps: int) -> list[tuple[str, str, float, float]]:

@@ -36,7 +36,7 @@ PER_STEP = ("normal network", "interreflection solve", "reflectance network", "b
 
 
 def machine() -> str:
-    """One line naming the CPU, its cores and torch."""
+    """One line naming the CPU, the vector instructions torch's kernels use on it, its cores and torch."""
     model = platform.processor() or platform.machine()
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -45,7 +45,8 @@ def machine() -> str:
                 break
     except OSError:
         pass
-    return f"{model}, {os.cpu_count()} cores, torch {torch.__version__} ({torch.get_num_threads()} threads)"
+    return (f"{model} ({torch.backends.cpu.get_cpu_capability()}), {os.cpu_count()} cores, "
+            f"torch {torch.__version__} ({torch.get_num_threads()} threads)")
 
 
 def profile(subject: str, overrides: list[str], out: Path, diligent: Path = DILIGENT) -> dict:
