@@ -302,7 +302,7 @@ def test_jars_render_the_same_on_one_thread_and_on_two():
 
 
 SCENE = dict(resolution=64, images=6, shapes=dict.fromkeys(SHAPES, 1.0), layouts=dict.fromkeys(LAYOUTS, 1.0),
-             camera=Camera(), paint=0.5, second_material=0.5, seed=11)
+             camera=Camera(), paint=0.5, second_material=0.5, interreflection=0.5, seed=11)
 
 
 def test_samples_drawn_in_a_worker_and_rendered_as_a_batch_are_the_samples():

@@ -4,7 +4,8 @@ A sample is a function of (seed, index): a shape (one of the families of
 :data:`unps.lightnet.shapes.SHAPES`, or a view of a mesh from a folder), a material (analytic,
 MERL table or MERL neural fit, mixed by weight; on a share of the samples a second one in patches),
 64 lights in one of the rig layouts of
-:mod:`unps.lightnet.rig` of which ``images`` are drawn, attached and cast shadows, per-image
+:mod:`unps.lightnet.rig` of which ``images`` are drawn, attached and cast shadows (on a share of the
+samples interreflections, :mod:`unps.lightnet.interreflection`), per-image
 intensities U(0.2, 2) shared by RGB, and then either the paper's perturbation U(−0.025, 0.025) or
 a simulated camera (exposure, noise, saturation, 8/16-bit storage).
 
@@ -24,6 +25,7 @@ from unps.device import to_device
 from unps.errors import InputError
 from unps.geometry import ShadowPlan, march_shadows
 from unps.lightnet.brdf import AnalyticBRDF
+from unps.lightnet.interreflection import MAX_REFLECTANCE, diffuse_reflectance, interreflected
 from unps.lightnet.materials import (FAMILIES, LobeTable, MaterialBank, coated, darkened, lobe_pixels,
                                      painted, shade, shade_batch)
 from unps.lightnet.rig import LAYOUTS, Camera, Exposure, Exposures, draw_lights, expose, record, record_batch
@@ -56,6 +58,9 @@ class LightDataset(Dataset):
             first, its diffuse albedo darkened by up to a hundredth (:data:`DARKEST_SECOND`), laid
             on in patches (:func:`~unps.lightnet.materials.coated`): objects of two materials, a
             dark glossy one beside a bright one, as many captures are.
+        interreflection: share of samples whose facets light each other
+            (:func:`~unps.lightnet.interreflection.interreflected`): cavities and the foot of a
+            wall filled with light bounced off the rest of the object, as in real captures.
         perturbation: half-width of the uniform noise added to images scaled to a 99th
             percentile of 1.
         saturation: the level, in units of that 99th percentile, where the simulated camera
@@ -85,7 +90,8 @@ class LightDataset(Dataset):
                  shapes: dict[str, float] | None = None, layouts: dict[str, float] | None = None,
                  camera: Camera | None = None, seed: int = 0, family: str | None = None,
                  shape: str | None = None, offset: int = 0, paint: float = 0.0,
-                 second_material: float = 0.0, device: torch.device = torch.device("cpu")):
+                 second_material: float = 0.0, interreflection: float = 0.0,
+                 device: torch.device = torch.device("cpu")):
         if resolution % 32 or resolution < 32:
             raise InputError(f"resolution must be a multiple of 32, got {resolution}")
         if not 1 <= images <= lights_per_shape:
@@ -94,6 +100,8 @@ class LightDataset(Dataset):
             raise InputError(f"paint is a share of the samples, in 0…1; got {paint}")
         if not 0 <= second_material <= 1:
             raise InputError(f"second_material is a share of the samples, in 0…1; got {second_material}")
+        if not 0 <= interreflection <= 1:
+            raise InputError(f"interreflection is a share of the samples, in 0…1; got {interreflection}")
         self.shapes = dict(shapes) if shapes else {"blob": 1.0}
         self.layouts = dict(layouts) if layouts else {"cap": 1.0}
         check_weights(self.shapes, SHAPES, "shape families")
@@ -106,7 +114,7 @@ class LightDataset(Dataset):
         self.materials = materials or MaterialBank()
         self.meshes, self.mesh_fraction = meshes or [], mesh_fraction if meshes else 0.0
         self.texture, self.paint, self.perturbation = texture, paint, perturbation
-        self.second_material = second_material
+        self.second_material, self.interreflection = second_material, interreflection
         self.intensity_range, self.seed, self.family = intensity_range, seed, family
         self.offset, self.saturation, self.device = offset, saturation, torch.device(device)
 
@@ -146,11 +154,12 @@ class LightDataset(Dataset):
         if self.second_material > 0 and float(u(1)) < self.second_material:
             second = darkened(self.materials.draw(g)[1], 10 ** (DARKEST_SECOND * float(u(1))))
             coat = coated(self.resolution, g) * maps.mask
+        bounces = self.interreflection > 0 and float(u(1)) < self.interreflection
         shape = (self.images, 3, self.resolution, self.resolution)
         if self.camera is not None:
-            return Scene(maps, brdf, family, lights[pick], intensities, albedo, second, coat,
+            return Scene(maps, brdf, family, lights[pick], intensities, albedo, second, coat, bounces,
                          exposure=expose(self.camera, shape, g, defer_noise=self.device.type != "cpu"))
-        return Scene(maps, brdf, family, lights[pick], intensities, albedo, second, coat,
+        return Scene(maps, brdf, family, lights[pick], intensities, albedo, second, coat, bounces,
                      saturation=self.saturation,
                      perturbation=self.perturbation * (2 * torch.rand(shape, generator=g) - 1))
 
@@ -163,6 +172,7 @@ class Scene:
         maps: the shape; brdf: its material (of ``family``); lights: (n, 3) unit directions;
         intensities: (n,); albedo: (H, W) or (H, W, 3) multiplier, or None.
         second: a second material, or None; coat: (H, W) float, 1 where it lies (None with it).
+        bounces: whether the object's facets light each other (interreflections).
         exposure: the simulated camera's draws, or None for the paper's perturbation:
         saturation: the level the stack is clipped at (None: none), and
         perturbation: (n, 3, H, W) the noise added after.
@@ -176,6 +186,7 @@ class Scene:
     albedo: torch.Tensor | None
     second: torch.nn.Module | None = None
     coat: torch.Tensor | None = None
+    bounces: bool = False
     exposure: Exposure | None = None
     saturation: float | None = None
     perturbation: torch.Tensor | None = None
@@ -183,7 +194,8 @@ class Scene:
 
 def render(scene: Scene, device: torch.device) -> dict[str, torch.Tensor]:
     """A sample of :class:`LightDataset` from its draws, computed on ``device``: shading, cast
-    shadows, scaling to a 99th percentile of 1, then the camera (or the perturbation).
+    shadows, interreflections (where drawn), scaling to a 99th percentile of 1, then the camera (or
+    the perturbation).
 
     Returns:
         ``images`` (n, 3, H, W), ``mask`` (1, H, W), ``directions`` (n, 3), ``intensities`` (n,),
@@ -198,6 +210,9 @@ def render(scene: Scene, device: torch.device) -> dict[str, torch.Tensor]:
         first, second = (shade(maps, brdf.to(device), lights, intensities, albedo, shadows=False)
                          for brdf in (scene.brdf, scene.second))
         images = torch.lerp(first, second, scene.coat.to(device)) * ~cast_shadows(maps, lights)[:, None]
+    if scene.bounces:
+        reflectance = reflectance_map(scene).to(device)
+        images = interreflected(images, maps.normals, maps.depth, maps.mask, reflectance)
     values = images[:, :, maps.mask].flatten()
     level = torch.quantile(values[:: max(1, len(values) // LEVEL_SAMPLES)], 0.99).clamp_min(1e-8)
     images = images / level
@@ -233,6 +248,8 @@ class SceneBatch:
             ``others`` and ``pixels`` (a sample without one: a row of no light and no pixels; the
             pixels only those under its coat), and (B, H, W) where each lies; None when no sample
             of the batch has one.
+        bounces: (B,) bool, the samples with interreflections; reflectance: (B, H, W, 3) their
+            pixels' diffuse reflectance (:func:`reflectance_map`), None when no sample bounces.
         exposures: the camera's draws, packed (or None); saturation, perturbation: (B, n, 3, H, W)
             the paper's noise otherwise.
     """
@@ -252,6 +269,8 @@ class SceneBatch:
     second_others: dict[int, torch.nn.Module]
     coat: torch.Tensor | None
     second_pixels: torch.Tensor | None
+    bounces: torch.Tensor
+    reflectance: torch.Tensor | None
     exposures: Exposures | None
     saturation: float | None
     perturbation: torch.Tensor | None
@@ -274,6 +293,9 @@ class SceneBatch:
         two = any(second is not None for second in seconds)
         coat = torch.stack([torch.zeros(size) if scene.coat is None else scene.coat for scene in scenes]) \
             if two else None
+        bounces = torch.tensor([scene.bounces for scene in scenes])
+        reflectance = torch.stack([reflectance_map(scene) if scene.bounces else torch.zeros(*size, 3)
+                                   for scene in scenes]) if bounces.any() else None
         return cls(torch.stack([scene.maps.normals for scene in scenes]), lights,
                    torch.stack([scene.intensities for scene in scenes]),
                    torch.stack([albedo_rgb(scene.albedo, size) for scene in scenes]),
@@ -286,7 +308,7 @@ class SceneBatch:
                    LobeTable.of(seconds) if two else None,
                    {i: brdf for i, brdf in enumerate(seconds)
                     if brdf is not None and not isinstance(brdf, AnalyticBRDF)},
-                   coat, lobe_pixels(mask & (coat > 0), seconds) if two else None,
+                   coat, lobe_pixels(mask & (coat > 0), seconds) if two else None, bounces, reflectance,
                    Exposures.of([scene.exposure for scene in scenes]) if camera else None,
                    scenes[0].saturation,
                    None if camera else torch.stack([scene.perturbation for scene in scenes]))
@@ -311,6 +333,10 @@ def render_batch(batch: SceneBatch, device: torch.device) -> dict[str, torch.Ten
         second = shade_batch(normals, mask, to(batch.second_pixels), batch.second_lobes.to(device),
                              batch.second_others, lights, intensities, albedo, shadows)
         images = torch.lerp(images, second, to(batch.coat)[:, None, None])
+    if batch.reflectance is not None:
+        depth, reflectance = to(batch.shadows.depth), to(batch.reflectance)
+        images = torch.stack([interreflected(images[b], normals[b], depth[b], mask[b], reflectance[b])
+                              if bounce else images[b] for b, bounce in enumerate(batch.bounces.tolist())])
     images = images / stack_levels(images, to(batch.level_index), to(batch.level_valid))
     if batch.exposures is not None:
         images = record_batch(images, batch.exposures)
@@ -334,6 +360,19 @@ def map_tensors(item, function):
     if isinstance(item, tuple):
         return tuple(map_tensors(value, function) for value in item)
     return item
+
+
+def reflectance_map(scene: Scene) -> torch.Tensor:
+    """(H, W, 3) the diffuse reflectance of each pixel of a scene
+    (:func:`~unps.lightnet.interreflection.diffuse_reflectance` of its material, or of its two
+    laid in their coat, times its albedo multiplier), clamped to
+    [0, :data:`~unps.lightnet.interreflection.MAX_REFLECTANCE`]; on the CPU."""
+    size = scene.maps.depth.shape
+    reflectance = diffuse_reflectance(scene.brdf).expand(*size, 3)
+    if scene.second is not None:
+        reflectance = torch.lerp(reflectance, diffuse_reflectance(scene.second).expand(*size, 3),
+                                 scene.coat[..., None])
+    return (reflectance * albedo_rgb(scene.albedo, size)).clamp(0, MAX_REFLECTANCE)
 
 
 def albedo_rgb(albedo: torch.Tensor | None, size: torch.Size) -> torch.Tensor:
