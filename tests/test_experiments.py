@@ -774,3 +774,19 @@ def test_operation_profile_names_each_convolution_shape_and_pass(capsys, tmp_pat
         ops.main(["--steps", "1", "--out", str(tmp_path / "runs")])
     assert "--steps must be at least 2, got 1" in capsys.readouterr().err
     assert not (tmp_path / "runs").exists()
+
+
+def test_light_benchmark_gallery_shows_the_frontal_image_and_reads_each_light_sets_errors(tmp_path):
+    gallery = load_script("lb_gallery", "experiments/light_benchmark/gallery.py")
+    mask = np.zeros((4, 4), bool)
+    mask[1:3, 1:3] = True
+    images = np.zeros((2, 4, 4, 3), np.float32)
+    images[0, mask] = 2.0
+    images[1, mask] = 1.0
+    directions = np.array([[0.6, 0, 0.8], [0, 0, 1.0]], np.float32)
+    picture = gallery.frontal_image(images, directions, mask)
+    np.testing.assert_allclose(picture[mask], 0.5)      # the second image, at half the 99th percentile
+    assert (picture[~mask] == 1).all()
+    (tmp_path / "benchmark-blob01-20.json").write_text(json.dumps(
+        {"stages": [{"stage": "network", "dir": 7.06}, {"stage": "selfcal", "dir": 6.81}]}))
+    assert gallery.stage_errors(tmp_path, "blob01") == "96: –  20: 7.1→6.8°  12: –"
