@@ -51,6 +51,20 @@ def test_vessels_are_concave_where_blobs_are_convex():
         assert concave_share(blob.depth, blob.mask) < 0.05
 
 
+def test_dishes_are_concave_and_their_outline_is_a_rim_that_faces_inward():
+    """A dish seen from inside: mostly concave, and on its outline the normals lean toward the
+    middle (a dome's lean outward), which is what makes it the dome's mirrored reading."""
+    for index in range(6):
+        dish = SHAPES["dish"](64, sample_generator(0, index))
+        assert concave_share(dish.depth, dish.mask) > 0.6
+        inner = -F.max_pool2d(-dish.mask[None, None].float(), 3, 1, 1)[0, 0] > 0.5
+        rim = dish.mask & ~inner
+        rows, cols = torch.nonzero(rim, as_tuple=True)
+        outward = torch.stack([cols - cols.float().mean(), -(rows - rows.float().mean())], -1)
+        lean = (dish.normals[rim][:, :2] * torch.nn.functional.normalize(outward, dim=-1)).sum(-1)
+        assert lean.mean() < 0
+
+
 def test_rasterising_keeps_the_nearest_point_and_its_normal():
     t = torch.linspace(-0.5, 0.5, 200)
     square = torch.stack(torch.meshgrid(t, t, indexing="ij"), -1).reshape(-1, 2)
@@ -379,7 +393,7 @@ def test_a_batch_renders_each_scene_as_it_renders_alone(camera):
     """Analytic materials of one and two lobes, a neural one, painted and plain albedo, one material
     and two (a neural second among them), the camera's noise drawn or left to the renderer (a seed):
     the batch is each scene's render, stacked."""
-    dataset = LightDataset(6, **{**SCENE, "camera": camera, "seed": 4}, materials=MaterialBank(measured=1.0))
+    dataset = LightDataset(6, **{**SCENE, "camera": camera, "seed": 5}, materials=MaterialBank(measured=1.0))
     scenes = [dataset.draw(i) for i in range(6)]
     scenes[1] = dataclasses.replace(scenes[1], brdf=tiny_neural_brdf(1), family="neural")
     scenes[5] = dataclasses.replace(scenes[5], second=tiny_neural_brdf(2),

@@ -1,4 +1,4 @@
-"""Scenes for the light network's training data: shapes as normal and depth maps, in six
+"""Scenes for the light network's training data: shapes as normal and depth maps, in seven
 families (:data:`SHAPES`; meshes: :mod:`unps.lightnet.meshes`), and the shadows they cast.
 
 Frame: x right, y up, z toward the camera; the orthographic view covers [−1, 1]², so one
@@ -54,6 +54,32 @@ def blob(resolution: int, generator: torch.Generator) -> ShapeMaps:
         z = z + amplitude * torch.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2 * width ** 2)) * (r < 1)
     mask = rho < 0.985 * outline
     return maps_from_depth(z, mask)
+
+
+def dish(resolution: int, generator: torch.Generator) -> ShapeMaps:
+    """A dish, shard or cupped petal seen from inside: a concave cap, curved less along one axis
+    (down to a trough), over a star-shaped outline, tilted up to 35°, with bumps and dents. Its
+    outline is a rim, not an occluding contour: it shades as a dome does under the lights mirrored
+    through the view axis, and only the shadows its rim casts and the light its inside bounces
+    tell the two apart."""
+    u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
+    x, y, phi, rho = _plane(resolution)
+    k = torch.arange(1, 6, dtype=torch.float32)
+    outline = 0.55 + 0.35 * u(1) + ((u(5) - 0.5) * 0.4 / k * torch.cos(
+        k * phi[..., None] + 2 * math.pi * u(5))).sum(-1)
+    rim_slope = math.radians(20 + 55 * float(u(1)))        # the wall's slope at the farthest rim
+    sphere = float(outline.max()) / math.sin(rim_slope)
+    across, along = _turned(x, y, 2 * math.pi * float(u(1)))
+    flatter = 0.3 + 0.7 * float(u(1))                      # 0.3: nearly a trough, as a pot's shard
+    z = -torch.sqrt((sphere ** 2 - across ** 2 - (flatter * along) ** 2).clamp_min(0))
+    for _ in range(int(2 + 6 * u(1))):
+        cx, cy = (u(2) - 0.5) * 1.2
+        width = 0.08 + 0.3 * u(1)
+        amplitude = (u(1) - 0.5) * 0.4 * width
+        z = z + amplitude * torch.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2 * width ** 2))
+    tilt, turn = math.tan(math.radians(35) * float(u(1))), 2 * math.pi * float(u(1))
+    z = z + tilt * (x * math.cos(turn) + y * math.sin(turn))
+    return maps_from_depth(z, rho < 0.985 * outline)
 
 
 def vessel(resolution: int, generator: torch.Generator) -> ShapeMaps:
@@ -226,7 +252,7 @@ def jar(resolution: int, generator: torch.Generator) -> ShapeMaps:
 
 
 SHAPES = {"blob": blob, "vessel": vessel, "relief": relief, "slab": slab, "sculpture": sculpture,
-          "jar": jar}
+          "jar": jar, "dish": dish}
 
 
 def draw_shape(weights: dict[str, float], resolution: int, generator: torch.Generator,
