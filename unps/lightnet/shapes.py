@@ -41,9 +41,7 @@ def blob(resolution: int, generator: torch.Generator) -> ShapeMaps:
     """A smooth random blob: a dome over a star-shaped outline, with Gaussian bumps and dents."""
     u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
     x, y, phi, rho = _plane(resolution)
-    k = torch.arange(1, 6, dtype=torch.float32)
-    outline = 0.55 + 0.35 * u(1) + ((u(5) - 0.5) * 0.4 / k * torch.cos(
-        k * phi[..., None] + 2 * math.pi * u(5))).sum(-1)
+    outline = _star_outline(phi, generator)
     r = (rho / outline).clamp(max=1)
     height = (0.4 + 0.6 * u(1)) * outline.mean()
     z = height * torch.sqrt(1 - r ** 2)        # smooth at the centre, whatever the outline
@@ -64,9 +62,7 @@ def dish(resolution: int, generator: torch.Generator) -> ShapeMaps:
     tell the two apart."""
     u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
     x, y, phi, rho = _plane(resolution)
-    k = torch.arange(1, 6, dtype=torch.float32)
-    outline = 0.55 + 0.35 * u(1) + ((u(5) - 0.5) * 0.4 / k * torch.cos(
-        k * phi[..., None] + 2 * math.pi * u(5))).sum(-1)
+    outline = _star_outline(phi, generator)
     rim_slope = math.radians(20 + 55 * float(u(1)))        # the wall's slope at the farthest rim
     sphere = float(outline.max()) / math.sin(rim_slope)
     across, along = _turned(x, y, 2 * math.pi * float(u(1)))
@@ -280,6 +276,15 @@ def _plane(resolution: int) -> tuple[torch.Tensor, ...]:
     t = torch.linspace(-1, 1, resolution)
     y, x = -t[:, None].expand(resolution, resolution), t[None, :].expand(resolution, resolution)
     return x, y, torch.atan2(y, x), torch.hypot(x, y)
+
+
+def _star_outline(phi: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
+    """(R, R) radius of a random star-shaped outline at each pixel's azimuth ``phi``: a circle of
+    radius 0.55–0.9 with five harmonics."""
+    u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
+    k = torch.arange(1, 6, dtype=torch.float32)
+    return 0.55 + 0.35 * u(1) + ((u(5) - 0.5) * 0.4 / k * torch.cos(
+        k * phi[..., None] + 2 * math.pi * u(5))).sum(-1)
 
 
 def _turned(x: torch.Tensor, y: torch.Tensor, angle) -> tuple[torch.Tensor, torch.Tensor]:
