@@ -790,3 +790,14 @@ def test_light_benchmark_gallery_shows_the_frontal_image_and_reads_each_light_se
     (tmp_path / "benchmark-blob01-20.json").write_text(json.dumps(
         {"stages": [{"stage": "network", "dir": 7.06}, {"stage": "selfcal", "dir": 6.81}]}))
     assert gallery.stage_errors(tmp_path, "blob01") == "96: –  20: 7.1→6.8°  12: –"
+
+
+def test_light_benchmark_gallery_names_a_results_folder_that_is_not_there(tmp_path):
+    """--tag that no benchmark run wrote: exit 2, the folder named, no picture written."""
+    out = tmp_path / "objects.png"
+    done = subprocess.run([sys.executable, "experiments/light_benchmark/gallery.py", "--cache", str(tmp_path),
+                           "--tag", "nope", "--out", str(out)],
+                          capture_output=True, text=True, cwd=Path(__file__).parents[1])
+    assert done.returncode == 2
+    assert f"--tag nope: no results folder {tmp_path / 'results' / 'nope'}" in done.stderr
+    assert not out.exists()
