@@ -801,3 +801,87 @@ def test_light_benchmark_gallery_names_a_results_folder_that_is_not_there(tmp_pa
     assert done.returncode == 2
     assert f"--tag nope: no results folder {tmp_path / 'results' / 'nope'}" in done.stderr
     assert not out.exists()
+
+
+def test_light_benchmark_single_material_group_is_the_same_objects_in_their_first_material(tmp_path, monkeypatch):
+    """``--only single``: each of the 24 objects with the same shape, seed (pose, lights, camera)
+    and storage, in the first of its materials alone; cached apart from the painted objects, and
+    read as its own group."""
+    benchmark = load_script("lb_benchmark", "experiments/light_benchmark/benchmark.py")
+    scenes = benchmark.scenes
+    assert len(scenes.SINGLE_MATERIAL) == len(scenes.OBJECTS) == 24
+    for one, painted in zip(scenes.SINGLE_MATERIAL, scenes.OBJECTS):
+        assert (one.name, one.shape, one.seed, one.storage) == (
+            painted.name, painted.shape, painted.seed, painted.storage)
+        assert one.materials == painted.materials[:1] and len(painted.materials) >= 2
+        assert one.key() != painted.key()
+    mask = np.zeros((32, 32), bool)
+    mask[4:28, 6:30] = True
+    assert set(np.unique(scenes.material_map(mask, 1, seed=3)[mask])) == {0}
+    assert set(np.unique(scenes.material_map(mask, 2, seed=3)[mask])) == {0, 1}
+
+    made = []
+    monkeypatch.setattr(scenes, "make_captures", lambda obj, data, cache: made.append(obj) or {"12": tmp_path})
+    monkeypatch.setattr(benchmark, "read_diligent", lambda folder, name, quantization: (name, quantization))
+    found = list(benchmark.cases(["single"], ["12"], tmp_path, tmp_path, names=["blob01", "pits"]))
+    assert [(group, name, label) for group, name, label, _ in found] == [
+        ("single", "blob01", "12"), ("single", "pits", "12")]
+    assert [read() for *_, read in found] == [("blob01", "floor"), ("pits", "round")]
+    assert [obj.materials for obj in made] == [("white-diffuse-bball",), ("colonial-maple-223",)]
+    assert "single" not in benchmark.DEFAULT_GROUPS
+
+
+def test_light_benchmark_by_material_tells_matte_from_glossy_and_averages_each_light_set(tmp_path):
+    """A Lambertian material's mirror peak is its off-peak value (1); a Phong lobe's stands far
+    out. The means are per light set, over the named objects; a missing case reads '–'."""
+    import torch
+    study = load_script("lb_by_material", "experiments/light_benchmark/by_material.py")
+    lambertian = lambda wi, wo: torch.full((len(wi), 3), 0.5 / np.pi)              # noqa: E731
+
+    def phong(wi, wo):
+        mirror = wi * torch.tensor([-1.0, -1.0, 1.0])
+        return 0.1 + (mirror * wo).sum(-1, keepdim=True).clamp_min(0).expand(-1, 3) ** 200
+
+    assert study.gloss(lambertian) == pytest.approx(1.0)
+    assert study.gloss(phong) > study.GLOSSY_PEAK
+    results = tmp_path / "run"
+    results.mkdir()
+    for group, name, label, error in [("single", "blob01", "96", 2.0), ("single", "face", "96", 4.0),
+                                      ("single", "blob01", "20", 1.0), ("benchmark", "blob01", "96", 9.0)]:
+        (results / f"{group}-{name}-{label}.json").write_text(json.dumps(
+            {"stages": [{"stage": "network", "dir": error}, {"stage": "reversal", "dir": 50.0}]}))
+    single = study.network_errors(results, "single")
+    assert single == {("blob01", "96"): 2.0, ("face", "96"): 4.0, ("blob01", "20"): 1.0}
+    assert study.means(single, ["blob01", "face"]) == "3.00 / – / –°"
+    assert study.means(single, ["blob01"]) == "2.00 / 1.00 / –°"
+    assert study.means(study.network_errors(results, "benchmark"), ["face"]) == "–"
+
+
+def test_average_weights_takes_each_parameters_mean_in_float32_and_refuses_mismatched_weights(tmp_path):
+    """Two float16 states average to their float32 mean, stored as float16; shares weigh them; a
+    missing parameter, a wrong count of shares or a missing file is refused with exit status 2."""
+    import torch
+    study = load_script("le_average_weights", "experiments/light_estimation/average_weights.py")
+    a = {"w": torch.tensor([1.0, 2048.0], dtype=torch.float16), "b": torch.zeros(2, dtype=torch.float16)}
+    b = {"w": torch.tensor([3.0, 2052.0], dtype=torch.float16), "b": torch.ones(2, dtype=torch.float16)}
+    mean = study.average_state([a, b], [0.5, 0.5])
+    assert mean["w"].dtype == torch.float16 and mean["w"].tolist() == [2.0, 2050.0]
+    assert study.average_state([a, b], [0.75, 0.25])["b"].tolist() == [0.25, 0.25]
+    with pytest.raises(ValueError, match="do not have the parameters"):
+        study.average_state([a, {"w": b["w"]}], [0.5, 0.5])
+    with pytest.raises(ValueError, match="shares must be 2"):
+        study.average_state([a, b], [1.0])
+
+    for name, state in (("a.pt", a), ("b.pt", b)):
+        torch.save({"state_dict": state, "unps_config": {"recipe": {}}, "notes": {"command": name}}, tmp_path / name)
+    script = "experiments/light_estimation/average_weights.py"
+    root = Path(__file__).parents[1]
+    done = subprocess.run([sys.executable, script, str(tmp_path / "ab.pt"), str(tmp_path / "a.pt"),
+                           str(tmp_path / "b.pt")], capture_output=True, text=True, cwd=root)
+    assert done.returncode == 0, done.stderr
+    saved = torch.load(tmp_path / "ab.pt", weights_only=False)
+    assert saved["state_dict"]["w"].tolist() == [2.0, 2050.0] and saved["unps_config"] == {"recipe": {}}
+    assert saved["notes"]["shares"] == [0.5, 0.5]
+    done = subprocess.run([sys.executable, script, str(tmp_path / "x.pt"), str(tmp_path / "a.pt"),
+                           str(tmp_path / "nope.pt")], capture_output=True, text=True, cwd=root)
+    assert done.returncode == 2 and "no such weights" in done.stderr and not (tmp_path / "x.pt").exists()

@@ -31,7 +31,7 @@ from unps.metrics import angular_error
 from unps.solvers.rpca import partial_sum_rpca
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from benchmark import DEFAULT_CACHE, DEFAULT_DATA, GROUPS, cases, light_source  # noqa: E402
+from benchmark import DEFAULT_CACHE, DEFAULT_DATA, DEFAULT_GROUPS, GROUPS, cases, light_source  # noqa: E402
 from scenes import LIGHT_SETS  # noqa: E402
 
 BIN_EDGES = np.linspace(-3.0, 3.0, 601)      # log albedo, relative to the median
@@ -78,7 +78,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
     parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
-    parser.add_argument("--only", nargs="+", choices=GROUPS, default=list(GROUPS))
+    parser.add_argument("--only", nargs="+", choices=GROUPS, default=list(DEFAULT_GROUPS))
     parser.add_argument("--sets", nargs="+", choices=list(LIGHT_SETS), default=list(LIGHT_SETS))
     parser.add_argument("--shear", type=float, default=0.6, help="the grid's largest |μ|, |ν|")
     parser.add_argument("--scale", type=float, default=0.7, help="the grid's largest |log λ|")

@@ -12,6 +12,9 @@ The cases (none of them feeds training):
   cast shadows and interreflections), each under a DiLiGenT-like dome of 96 lights and sparse
   rigs of 20 and 12, stored as 8-bit (``floor`` and ``round``) or 16-bit with sensor noise.
   Rendered on first use into ``--cache`` (about 20 s per object on 2 cores), then read from it.
+- **single**: the same 24 objects, each in one material alone (``scenes.SINGLE_MATERIAL``: the
+  first of its materials, the same pose, lights and camera), as most of DiLiGenT's objects and
+  many users' captures are; asked for by name (``--only single``).
 - **diligent**: ball, cat and pot1 of ``../shared/data`` at 96 images, and at 20 and 12 images
   evenly spread over their lights (farthest-point order from the light nearest the view).
 - **synthetic**: unps's eight rendered subjects (100 images).
@@ -47,7 +50,8 @@ import scenes  # noqa: E402
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
 DEFAULT_CACHE = Path("~/.cache/unps/light_benchmark").expanduser()
 DILIGENT = ("ball", "cat", "pot1")
-GROUPS = ("benchmark", "diligent", "synthetic")
+GROUPS = ("benchmark", "single", "diligent", "synthetic")
+DEFAULT_GROUPS = ("benchmark", "diligent", "synthetic")
 RAISED, RAISED_TWICE = 1.0, 2.0     # degrees: a stage that raised the error by more is flagged
 
 
@@ -68,8 +72,10 @@ def evenly_spread(directions: np.ndarray, count: int) -> np.ndarray:
 
 def cases(groups, sets, data: Path, cache: Path, names=None):
     """(group, name, light set, function reading the subject) for every case asked for."""
-    if "benchmark" in groups:
-        for obj in scenes.OBJECTS:
+    for group, objects in (("benchmark", scenes.OBJECTS), ("single", scenes.SINGLE_MATERIAL)):
+        if group not in groups:
+            continue
+        for obj in objects:
             if names and obj.name not in names:
                 continue
             for label in sets:
@@ -77,7 +83,7 @@ def cases(groups, sets, data: Path, cache: Path, names=None):
                     folder = scenes.make_captures(obj, data, cache)[label]
                     return read_diligent(folder, name=obj.name,
                                          quantization=scenes.quantization(obj.storage))
-                yield "benchmark", obj.name, label, read
+                yield group, obj.name, label, read
     if "diligent" in groups:
         for name in DILIGENT:
             if names and name not in names:
@@ -95,7 +101,7 @@ def cases(groups, sets, data: Path, cache: Path, names=None):
                 yield "synthetic", name, str(100), lambda name=name: synthetic(name)
 
 
-def study_parser(description: str, out_help: str, groups=GROUPS) -> argparse.ArgumentParser:
+def study_parser(description: str, out_help: str, groups=DEFAULT_GROUPS) -> argparse.ArgumentParser:
     """The command line the light benchmark's studies share: where the data, captures and results
     are, which cases (``groups`` by default), ``--report`` and ``--threads`` (default 1)."""
     parser = argparse.ArgumentParser(description=description)
@@ -224,7 +230,7 @@ def main():
     parser.add_argument("--out", type=Path, default=None,
                         help="where each case's result is kept (default: <cache>/results/<tag>)")
     parser.add_argument("--tag", default="default", help="names the results folder")
-    parser.add_argument("--only", nargs="+", choices=GROUPS, default=list(GROUPS))
+    parser.add_argument("--only", nargs="+", choices=GROUPS, default=list(DEFAULT_GROUPS))
     parser.add_argument("--sets", nargs="+", choices=list(scenes.LIGHT_SETS), default=list(scenes.LIGHT_SETS))
     parser.add_argument("--names", nargs="*", help="only these objects or subjects")
     parser.add_argument("--stages", nargs="*", default=None,

@@ -103,7 +103,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", type=Path, default=benchmark.DEFAULT_DATA)
     parser.add_argument("--cache", type=Path, default=benchmark.DEFAULT_CACHE)
-    parser.add_argument("--only", nargs="+", choices=benchmark.GROUPS, default=list(benchmark.GROUPS))
+    parser.add_argument("--only", nargs="+", choices=benchmark.GROUPS, default=list(benchmark.DEFAULT_GROUPS))
     parser.add_argument("--sets", nargs="+", choices=list(scenes.LIGHT_SETS), default=list(scenes.LIGHT_SETS))
     parser.add_argument("--names", nargs="*", help="only these objects or subjects")
     args = parser.parse_args()

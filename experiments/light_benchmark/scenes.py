@@ -31,7 +31,7 @@ import hashlib
 import json
 import math
 import tempfile
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -209,6 +209,12 @@ def _objects() -> tuple[BenchmarkObject, ...]:
 
 
 OBJECTS = _objects()
+
+SINGLE_MATERIAL = tuple(replace(obj, materials=obj.materials[:1]) for obj in OBJECTS)
+"""The same 24 objects, each in the first of its materials alone: the same shape, pose, texture,
+lights, camera and storage (the same seed), so that a network's error on an object of one
+material is read beside its error on the object painted in patches. DiLiGenT's objects are
+mostly of one material, and so are many users' captures."""
 
 
 # rendering --------------------------------------------------------------------------------
