@@ -885,3 +885,25 @@ def test_average_weights_takes_each_parameters_mean_in_float32_and_refuses_misma
     done = subprocess.run([sys.executable, script, str(tmp_path / "x.pt"), str(tmp_path / "a.pt"),
                            str(tmp_path / "nope.pt")], capture_output=True, text=True, cwd=root)
     assert done.returncode == 2 and "no such weights" in done.stderr and not (tmp_path / "x.pt").exists()
+
+
+def test_light_benchmark_records_which_weights_its_results_were_made_with(tmp_path):
+    """The digest of the weights file a run reads (``checkpoint=`` or the shipped one) is part of
+    what a results folder records, so rows of two networks never share a folder under one tag."""
+    import hashlib
+
+    from unps.lightnet.system import SHIPPED
+    benchmark = load_script("lb_benchmark", "experiments/light_benchmark/benchmark.py")
+    weights = tmp_path / "w.pt"
+    weights.write_bytes(b"one network")
+    assert benchmark.weights_used([f"checkpoint={weights}", "selfcal.steps=10"]) == \
+        hashlib.sha256(b"one network").hexdigest()[:12]
+    assert benchmark.weights_used(["selfcal.steps=10"]) == benchmark.weights_used(["checkpoint=null"]) == \
+        hashlib.sha256(SHIPPED.read_bytes()).hexdigest()[:12]
+    with pytest.raises(InputError, match="nope.pt: light-network weights not found"):
+        benchmark.weights_used([f"checkpoint={tmp_path / 'nope.pt'}"])
+    made = {"stages": ["reversal"], "settings": [], "weights": benchmark.weights_used([])}
+    benchmark.runs.claim(tmp_path / "run", made)
+    weights.write_bytes(b"the next network")
+    with pytest.raises(ValueError, match="give another --tag"):
+        benchmark.runs.claim(tmp_path / "run", {**made, "weights": benchmark.weights_used([f"checkpoint={weights}"])})

@@ -30,6 +30,7 @@ summary compares, per light count, the final lights with the network's.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import logging
 import sys
@@ -160,6 +161,23 @@ def light_source(stages: list[str] | None, settings: list[str]):
     return source, OmegaConf.to_container(node.stages)
 
 
+def weights_used(settings: list[str]) -> str:
+    """The first 12 hex digits of the SHA-256 of the light-network weights a run reads: the file of
+    a ``checkpoint=`` setting, else the weights shipped with unps. A results folder records it, so
+    that a tag rerun after new weights are shipped is refused rather than mixed.
+
+    Raises:
+        InputError: the weights file is not there.
+    """
+    from unps.lightnet.system import SHIPPED
+
+    given = [s.split("=", 1)[1] for s in settings if s.startswith("checkpoint=")]
+    path = Path(given[-1]).expanduser() if given and given[-1] not in ("null", "") else SHIPPED
+    if not path.is_file():
+        raise InputError(f"{path}: light-network weights not found")
+    return hashlib.sha256(path.read_bytes()).hexdigest()[:12]
+
+
 def run_case(source, subject) -> dict:
     """The lights' errors after each stage, each stage's verdict, and the seconds it took."""
     with recording() as seconds:
@@ -257,8 +275,9 @@ def main():
         parser.error(str(e))
     out = args.out or args.cache / "results" / args.tag
     try:
-        runs.claim(out, {"stages": stage_names, "settings": args.settings, "scenes": scenes.SCENE_VERSION})
-    except ValueError as e:
+        runs.claim(out, {"stages": stage_names, "settings": args.settings, "scenes": scenes.SCENE_VERSION,
+                         "weights": weights_used(args.settings)})
+    except (ValueError, InputError) as e:
         parser.error(str(e))
     print(f"stages: network → {' → '.join(stage_names) or '(none)'}; settings: "
           f"{' '.join(args.settings) or 'defaults'}; results in {out}")

@@ -68,7 +68,8 @@ class BenchmarkObject:
     Attributes:
         name: its name.
         shape: a builder in :data:`SHAPES` and its arguments.
-        materials: two or three held-out MERL materials, laid on in patches.
+        materials: two or three held-out MERL materials, laid on in patches (one in
+            :data:`SINGLE_MATERIAL`).
         storage: one of :data:`FORMATS`.
         seed: draws the pose, patches, texture, lights and camera.
     """
