@@ -850,11 +850,12 @@ def test_light_benchmark_by_material_tells_matte_from_glossy_and_averages_each_l
                                       ("single", "blob01", "20", 1.0), ("benchmark", "blob01", "96", 9.0)]:
         (results / f"{group}-{name}-{label}.json").write_text(json.dumps(
             {"stages": [{"stage": "network", "dir": error}, {"stage": "reversal", "dir": 50.0}]}))
-    single = study.network_errors(results, "single")
+    single = study.stage_errors(results, "single")
     assert single == {("blob01", "96"): 2.0, ("face", "96"): 4.0, ("blob01", "20"): 1.0}
+    assert study.stage_errors(results, "single", final=True)[("face", "96")] == 50.0
     assert study.means(single, ["blob01", "face"]) == "3.00 / – / –°"
     assert study.means(single, ["blob01"]) == "2.00 / 1.00 / –°"
-    assert study.means(study.network_errors(results, "benchmark"), ["face"]) == "–"
+    assert study.means(study.stage_errors(results, "benchmark"), ["face"]) == "–"
 
 
 def test_average_weights_takes_each_parameters_mean_in_float32_and_refuses_mismatched_weights(tmp_path):

@@ -1,8 +1,10 @@
 """The light network's error by material: objects of one material, matte or glossy, beside the painted ones.
 
     python experiments/light_benchmark/by_material.py --tags runI runP     # results of benchmark.py --tag …
+    python experiments/light_benchmark/by_material.py --tags runP-default --final
 
-Reads the network's direction error (the first stage of each case) from ``<cache>/results/<tag>``
+Reads the network's direction error (the first stage of each case; with ``--final``, the last
+stage's) from ``<cache>/results/<tag>``
 for the ``single`` group (``benchmark.py --only single``: each object in the first of its
 materials alone) and the ``benchmark`` group (the same objects painted in two or three), and
 prints, per tag, the mean over the objects of each kind under 96 / 20 / 12 lights:
@@ -64,12 +66,13 @@ def kinds(data: Path) -> dict[str, str]:
     return out
 
 
-def network_errors(results: Path, group: str) -> dict[tuple[str, str], float]:
-    """{(object, light set): the network's direction error} of one group in a results folder."""
+def stage_errors(results: Path, group: str, final: bool = False) -> dict[tuple[str, str], float]:
+    """{(object, light set): the direction error after the network (or, ``final``, after the last
+    stage)} of one group in a results folder."""
     out = {}
     for path in results.glob(f"{group}-*.json"):
         name, label = path.stem[len(group) + 1:].rsplit("-", 1)
-        out[name, label] = json.loads(path.read_text())["stages"][0]["dir"]
+        out[name, label] = json.loads(path.read_text())["stages"][-1 if final else 0]["dir"]
     return out
 
 
@@ -87,6 +90,7 @@ def main() -> None:
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
     parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
     parser.add_argument("--tags", nargs="+", required=True, help="results folders of benchmark.py --tag")
+    parser.add_argument("--final", action="store_true", help="the last stage's error, not the network's")
     args = parser.parse_args()
     missing = [tag for tag in args.tags if not (args.cache / "results" / tag).is_dir()]
     if missing:
@@ -96,10 +100,11 @@ def main() -> None:
     glossy = sorted(n for n, k in kind.items() if k == "glossy")
     print(f"matte ({len(matte)}): {' '.join(matte)}\nglossy ({len(glossy)}): {' '.join(glossy)}\n"
           f"left out (read inside out by every network): {' '.join(INSIDE_OUT)}\n")
+    print(("final lights" if args.final else "network") + " (direction error under 96 / 20 / 12 lights)")
     print(f"{'tag':<16} {'one material, matte':>24} {'one material, glossy':>24} {'painted':>24}")
     for tag in args.tags:
         results = args.cache / "results" / tag
-        single, painted = network_errors(results, "single"), network_errors(results, "benchmark")
+        single, painted = (stage_errors(results, group, args.final) for group in ("single", "benchmark"))
         print(f"{tag:<16} {means(single, matte):>24} {means(single, glossy):>24} "
               f"{means(painted, matte + glossy):>24}")
 
