@@ -4,10 +4,10 @@
     python experiments/light_benchmark/by_material.py --tags runP-default --final
 
 Reads the network's direction error (the first stage of each case; with ``--final``, the last
-stage's) from ``<cache>/results/<tag>``
-for the ``single`` group (``benchmark.py --only single``: each object in the first of its
-materials alone) and the ``benchmark`` group (the same objects painted in two or three), and
-prints, per tag, the mean over the objects of each kind under 96 / 20 / 12 lights:
+stage's) from ``<cache>/results/<tag>`` for the ``single`` group (``benchmark.py --only single``:
+each object in the first of its materials alone) and the ``benchmark`` group (the same objects
+painted in two or three), and prints, per tag, the mean over the objects of each kind under
+96 / 20 / 12 lights:
 
 - **matte**: the single-material objects whose material's mirror peak is under
   :data:`GLOSSY_PEAK` times its off-peak value (:func:`gloss`), less those that every network
