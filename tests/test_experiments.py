@@ -317,7 +317,8 @@ def test_light_benchmark_normals_reads_finished_rows_refuses_mixed_settings_and_
     normals.runs.claim(tmp_path, ["preset.prior_weight=0"])
     with pytest.raises(ValueError, match=r'made with \["preset.prior_weight=0"\], not \[\]'):
         normals.runs.claim(tmp_path, [])
-    with pytest.raises(ValueError, match=r'not \["light=selfcal", "preset.prior_weight=0"\]'):
+    with pytest.raises(ValueError, match=r'not \["light=selfcal", "preset.prior_weight=0", '
+                                         r'"light-network weights [0-9a-f]{12}"\]'):
         normals.runs.claim(tmp_path, normals.made_with("selfcal", ["preset.prior_weight=0"]))
     assert normals.run_folder(tmp_path, "default", "96") == tmp_path / "normals" / "default"
     assert normals.run_folder(tmp_path, "default", "12") == tmp_path / "normals" / "default-12"
@@ -889,8 +890,9 @@ def test_average_weights_takes_each_parameters_mean_in_float32_and_refuses_misma
 
 
 def test_light_benchmark_records_which_weights_its_results_were_made_with(tmp_path):
-    """The digest of the weights file a run reads (``checkpoint=`` or the shipped one) is part of
-    what a results folder records, so rows of two networks never share a folder under one tag."""
+    """The digest of the weights file a run reads (``checkpoint=``, ``light.checkpoint=`` for the
+    normals study's estimated lights, or the shipped one) is part of what a results folder records,
+    so rows of two networks never share a folder under one tag."""
     import hashlib
 
     from unps.lightnet.system import SHIPPED
@@ -908,3 +910,10 @@ def test_light_benchmark_records_which_weights_its_results_were_made_with(tmp_pa
     weights.write_bytes(b"the next network")
     with pytest.raises(ValueError, match="give another --tag"):
         benchmark.runs.claim(tmp_path / "run", {**made, "weights": benchmark.weights_used([f"checkpoint={weights}"])})
+    normals = load_script("lb_normals", "experiments/light_benchmark/normals.py")
+    assert normals.made_with("selfcal", [f"light.checkpoint={weights}"])[-1] == \
+        f"light-network weights {hashlib.sha256(b'the next network').hexdigest()[:12]}"
+    assert normals.made_with("estimated", [])[-1] == f"light-network weights {benchmark.weights_used([])}"
+    assert normals.made_with("gt", [f"light.checkpoint={weights}"]) == [f"light.checkpoint={weights}"]
+    with pytest.raises(InputError, match="gone.pt: light-network weights not found"):
+        normals.made_with("selfcal", [f"light.checkpoint={tmp_path / 'gone.pt'}"])

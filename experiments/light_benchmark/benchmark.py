@@ -30,7 +30,6 @@ summary compares, per light count, the final lights with the network's.
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import logging
 import sys
@@ -162,20 +161,14 @@ def light_source(stages: list[str] | None, settings: list[str]):
 
 
 def weights_used(settings: list[str]) -> str:
-    """The first 12 hex digits of the SHA-256 of the light-network weights a run reads: the file of
-    a ``checkpoint=`` setting, else the weights shipped with unps. A results folder records it, so
-    that a tag rerun after new weights are shipped is refused rather than mixed.
+    """The digest (:func:`runs.weights_digest`) of the light-network weights a run with these
+    settings reads: the file of the last ``checkpoint=`` setting, else the shipped weights.
 
     Raises:
         InputError: the weights file is not there.
     """
-    from unps.lightnet.system import SHIPPED
-
     given = [s.split("=", 1)[1] for s in settings if s.startswith("checkpoint=")]
-    path = Path(given[-1]).expanduser() if given and given[-1] not in ("null", "") else SHIPPED
-    if not path.is_file():
-        raise InputError(f"{path}: light-network weights not found")
-    return hashlib.sha256(path.read_bytes()).hexdigest()[:12]
+    return runs.weights_digest(given[-1] if given else None)
 
 
 def run_case(source, subject) -> dict:

@@ -163,7 +163,11 @@ def main():
     args = parser.parse_args()
     cases = benchmark.study_cases(args)
     out = args.out or args.cache / "free_fits"
-    runs.claim(out, {"scenes": scenes.SCENE_VERSION, "held": repr(HELD), "free": repr(FREE)})
+    try:
+        runs.claim(out, {"scenes": scenes.SCENE_VERSION, "held": repr(HELD), "free": repr(FREE),
+                         "weights": runs.weights_digest(None)})
+    except ValueError as e:
+        parser.error(str(e))
     print(report(runs.summaries(cases, out, run_case, summarise, progress, args.report)))
 
 

@@ -165,7 +165,11 @@ def main() -> None:
     args = parser.parse_args()
     cases = benchmark.study_cases(args)
     out = args.out or args.cache / "integrability"
-    runs.claim(out, {"scenes": scenes.SCENE_VERSION, "smooth": SMOOTH_PIXELS, "reweightings": REWEIGHTINGS})
+    try:
+        runs.claim(out, {"scenes": scenes.SCENE_VERSION, "smooth": SMOOTH_PIXELS,
+                         "reweightings": REWEIGHTINGS, "weights": runs.weights_digest(None)})
+    except ValueError as e:
+        parser.error(str(e))
     network, _ = benchmark.light_source([], [])
     print(report(runs.summaries(cases, out, lambda subject: run_case(subject, network), lambda r: r,
                                 progress, args.report)))

@@ -147,7 +147,10 @@ def fit_moves(before: Path, after: Path, linear: bool = False) -> None:
 def selfcal_moves(args) -> None:
     """The self-calibration's move on each case, split as :func:`decompose` splits it."""
     out = args.cache / "results" / "selfcal_moves"
-    runs.claim(out, {"scenes": scenes.SCENE_VERSION})
+    try:
+        runs.claim(out, {"scenes": scenes.SCENE_VERSION, "weights": runs.weights_digest(None)})
+    except ValueError as e:
+        sys.exit(f"{e} (this study has no --tag: delete the folder to start it again)")
     network, _ = benchmark.light_source(["reversal"], [])
     selfcal = benchmark.instantiate_node(["fit"], ["light=selfcal"], "light.selfcal")()
 

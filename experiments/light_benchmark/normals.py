@@ -41,6 +41,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from unps.errors import InputError
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import runs  # noqa: E402
 import scenes  # noqa: E402
@@ -75,13 +77,22 @@ def run_row(folder: Path, obj: scenes.BenchmarkObject, method: str, light: str,
 
 
 def made_with(light: str, settings: list[str]) -> list[str]:
-    """What a run folder records its rows as made with: the overrides, the light first where it is
-    not the true one (so that the folders of the true lights read as they always have).
+    """What a run folder records its rows as made with: the overrides; where the lights are
+    estimated, the light first and the digest of the light-network weights last
+    (:func:`runs.weights_digest` of ``light.checkpoint=``, else of the shipped weights), so that a
+    rerun after new weights are shipped is refused rather than mixed. The folders of the true
+    lights read as they always have.
 
-    >>> made_with("gt", ["preset.width=96"]), made_with("selfcal", [])
-    (['preset.width=96'], ['light=selfcal'])
+    >>> made_with("gt", ["preset.width=96"])
+    ['preset.width=96']
+    >>> made = made_with("selfcal", []); made[0], made[-1].startswith("light-network weights ")
+    ('light=selfcal', True)
     """
-    return list(settings) if light == "gt" else [f"light={light}", *settings]
+    if light == "gt":
+        return list(settings)
+    given = [s.split("=", 1)[1] for s in settings if s.startswith("light.checkpoint=")]
+    return [f"light={light}", *settings,
+            f"light-network weights {runs.weights_digest(given[-1] if given else None)}"]
 
 
 def run_folder(cache: Path, tag: str, lights: str) -> Path:
@@ -177,7 +188,7 @@ def main(argv=None) -> None:
     out = args.out or run_folder(args.cache, args.tag, args.lights)
     try:
         runs.claim(out, made_with(args.light, args.settings))
-    except ValueError as e:
+    except (ValueError, InputError) as e:
         parser.error(str(e))
 
     print(machine_line())

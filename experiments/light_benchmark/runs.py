@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from collections.abc import Iterator
@@ -9,6 +10,24 @@ from contextlib import contextmanager
 from pathlib import Path
 
 MARK = "running.pid"
+
+
+def weights_digest(checkpoint: str | None) -> str:
+    """The first 12 hex digits of the SHA-256 of the light-network weights a run reads: the file
+    ``checkpoint`` names, else (``None``, ``""`` or ``"null"``) the weights shipped with unps. A
+    study that estimates lights records it in its folder's claim, so that a rerun after new weights
+    are shipped is refused rather than mixed with rows of the old network.
+
+    Raises:
+        InputError: the weights file is not there.
+    """
+    from unps.errors import InputError
+    from unps.lightnet.system import SHIPPED
+
+    path = Path(checkpoint).expanduser() if checkpoint not in (None, "", "null") else SHIPPED
+    if not path.is_file():
+        raise InputError(f"{path}: light-network weights not found")
+    return hashlib.sha256(path.read_bytes()).hexdigest()[:12]
 
 
 def claim(out: Path, made_with) -> None:

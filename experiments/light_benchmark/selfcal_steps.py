@@ -125,7 +125,11 @@ def main(argv=None) -> None:
         parser.error(f"--marks {bad}: each must be a multiple of 100 up to --steps ({args.steps}), "
                      "or --steps")
     out = args.out or args.cache / "results" / f"selfcal_steps-{args.steps}"
-    runs.claim(out, {"steps": args.steps, "scenes": scenes.SCENE_VERSION, "directions": True})
+    try:
+        runs.claim(out, {"steps": args.steps, "scenes": scenes.SCENE_VERSION, "directions": True,
+                         "weights": runs.weights_digest(None)})
+    except ValueError as e:
+        parser.error(str(e))
     print(f"network → reversal test → self-calibration, default settings but {args.steps} steps; the "
           f"lights' mean direction error at steps {', '.join(map(str, args.marks))}; results in {out}")
     network, _ = benchmark.light_source(["reversal"], [])

@@ -148,7 +148,8 @@ def main():
         settings = {key: ast.literal_eval(value) for key, value in (s.split("=", 1) for s in args.settings)}
         selfcal = SelfCalibration(device="cpu", **settings)
         runs.claim(out, {"scenes": scenes.SCENE_VERSION, "halves": "even/odd",
-                         "stages": ["reversal", "selfcal"], "settings": args.settings})
+                         "stages": ["reversal", "selfcal"], "settings": args.settings,
+                         "weights": runs.weights_digest(None)})
     except (ValueError, TypeError, SyntaxError) as e:
         parser.error(str(e))
 
