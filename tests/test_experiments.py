@@ -15,6 +15,7 @@ from hydra.core.override_parser.overrides_parser import OverridesParser
 from conftest import diligent_object, load_script
 from unps.data.analytic import render_lambertian
 from unps.data.diligent import find_diligent_object, read_diligent, read_diligent_object
+from unps.data.lights import Lights
 from unps.data.writer import write_diligent
 from unps.errors import InputError
 from unps.fit import fit
@@ -336,6 +337,25 @@ def test_light_benchmark_builds_and_runs_the_light_source_as_the_fit_does():
     assert result["n_images"] == 8 and np.isfinite(result["stages"][-1]["dir"])
     with pytest.raises(InputError, match="not a light stage"):
         benchmark.light_source(["bogus"], [])[0](subject)
+    slants = [f"{s['slant']:+.2f}°" for s in (result["stages"][0], result["stages"][-1])]
+    assert benchmark.summary({("benchmark", "sphere", "8"): result}, names).splitlines()[-1].split()[-2:] == slants
+    before = {**result, "stages": [{k: v for k, v in s.items() if k != "slant"} for s in result["stages"]]}
+    assert benchmark.summary({("benchmark", "sphere", "8"): before}, names).splitlines()[-1].split()[-2:] == \
+        ["—", "—"]
+
+
+def test_steepened_study_reads_the_network_lights_slant_and_the_error_of_steepening_them():
+    """Lights read 2° nearer the view axis than the truth: slant bias −2°, and among the steps
+    the error is lowest at +2° (where it is 0)."""
+    steepened = load_script("lb_steepened", "experiments/light_benchmark/steepened.py")
+    subject = render_lambertian(shape="sphere", size=24, n_lights=8, seed=0)
+    flattened = steepened.steepened(subject.light_directions, -2.0)
+    result = steepened.run_case(subject, lambda s: Lights(flattened, None, "estimated"))
+    assert result["slant"] == pytest.approx(-2, abs=1e-3)
+    assert result["errors"][steepened.STEPS.index(2.0)] == pytest.approx(0, abs=1e-3)
+    assert result["errors"][0] == pytest.approx(2, abs=1e-3)
+    last = steepened.report({("diligent", "ball", "8"): result}).splitlines()[-1].split()
+    assert last[:5] == ["diligent", "8", "1", "-2.00°", "-2.00°"] and last[5 + steepened.STEPS.index(2.0)] == "0.00*"
 
 
 def test_slant_script_remeasures_runs_and_their_seed_ensemble(tmp_path, capsys, monkeypatch):
@@ -857,6 +877,12 @@ def test_light_benchmark_by_material_tells_matte_from_glossy_and_averages_each_l
     assert study.means(single, ["blob01", "face"]) == "3.00 / – / –°"
     assert study.means(single, ["blob01"]) == "2.00 / 1.00 / –°"
     assert study.means(study.stage_errors(results, "benchmark"), ["face"]) == "–"
+    (results / "single-face-20.json").write_text(json.dumps(
+        {"stages": [{"stage": "network", "dir": 3.0, "slant": -1.5}, {"stage": "reversal", "dir": 3.0, "slant": -0.5}]}))
+    slants = study.stage_errors(results, "single", key="slant")
+    assert slants == {("face", "20"): -1.5}                   # results made before the slant bias left out
+    assert study.means(slants, ["face"], "+") == "– / -1.50 / –°"
+    assert study.stage_errors(results, "single", final=True, key="slant") == {("face", "20"): -0.5}
 
 
 def test_average_weights_takes_each_parameters_mean_in_float32_and_refuses_mismatched_weights(tmp_path):

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from unps.metrics import (angular_error, light_direction_mae, light_intensity_error, normal_metrics,
-                          slant_bias)
+from unps.metrics import (angular_error, light_direction_mae, light_intensity_error, light_slant_bias,
+                          normal_metrics, slant_bias)
 
 
 def test_angular_error_known_values():
@@ -64,6 +64,24 @@ def test_slant_bias_does_not_read_errors_that_point_every_way_as_steepening():
 def test_light_direction_mae():
     assert light_direction_mae(np.array([[0, 0, 1.0], [1, 0, 0]]),
                                np.array([[0, 0, 1.0], [0, 0, 1]])) == pytest.approx(45)
+
+
+def test_light_slant_bias_reads_lights_pulled_toward_the_view_axis_and_lands_in_light_errors():
+    """Lights read 3° nearer the view axis than they are, or turned about it: −3° and 0°; the
+    light stages' errors (``metrics.json``) carry it."""
+    from unps.data.lights import Lights
+    from unps.data.subject import Subject
+    from unps.lights import light_errors
+    true = np.array([normal(slant, tilt) for slant, tilt in [(20, 0), (35, 120), (50, 250)]])
+    flattened = np.array([normal(slant - 3, tilt) for slant, tilt in [(20, 0), (35, 120), (50, 250)]])
+    turned = np.array([normal(slant, tilt + 2) for slant, tilt in [(20, 0), (35, 120), (50, 250)]])
+    assert light_slant_bias(flattened, true) == pytest.approx(-3)
+    assert light_slant_bias(turned, true) == pytest.approx(0, abs=0.02)
+    subject = Subject("three lights", np.ones((3, 2, 2, 3), np.float32), np.ones((2, 2), bool),
+                      light_directions=true.astype(np.float32))
+    errors = light_errors(Lights(flattened.astype(np.float32), None, "estimated"), subject)
+    assert errors["light_slant_bias"] == pytest.approx(-3, abs=1e-4)
+    assert errors["light_dir_mae"] == pytest.approx(3, abs=1e-3)
 
 
 def test_intensity_error_is_scale_invariant():

@@ -82,6 +82,19 @@ def light_direction_mae(pred: np.ndarray, gt: np.ndarray) -> float:
     return float(angular_error(pred, gt).mean())
 
 
+def light_slant_bias(pred: np.ndarray, gt: np.ndarray) -> float:
+    """:func:`slant_bias` of (n, 3) light directions: the mean signed error of their angle from
+    the view axis, in degrees; < 0 when the lights are read nearer the view axis than they are (a
+    flattened reading), > 0 when read more grazing. Errors that point every way average 0.
+
+    >>> flat = np.array([[np.sin(np.radians(28)), 0.0, np.cos(np.radians(28))]])
+    >>> round(light_slant_bias(flat, np.array([[np.sin(np.radians(30)), 0.0, np.cos(np.radians(30))]])), 6)
+    -2.0
+    """
+    gt = np.asarray(gt)
+    return slant_bias(np.asarray(pred)[None], gt[None], np.ones((1, len(gt)), bool))
+
+
 def light_intensity_error(pred: np.ndarray, gt: np.ndarray) -> float:
     """Scale-invariant relative intensity error (SDPS-Net's definition).
 

@@ -178,7 +178,8 @@ def run_case(source, subject) -> dict:
         lights = source(subject)
         total = time.perf_counter() - start
     stages = [{"stage": v.stage, "outcome": v.outcome, "dir": v.errors["light_dir_mae"],
-               "int": v.errors.get("light_int_err"), "reason": v.reason} for v in lights.verdicts]
+               "slant": v.errors["light_slant_bias"], "int": v.errors.get("light_int_err"),
+               "reason": v.reason} for v in lights.verdicts]
     return {"stages": stages, "seconds": total, "stage_seconds": dict(seconds),
             "n_images": subject.n_images}
 
@@ -206,10 +207,18 @@ def row(group: str, name: str, label: str, result: dict, stage_names: list[str])
             f" {result['seconds']:>5.0f}s  {' '.join(flags)}")
 
 
+def median_slant(chosen: list[dict], stage: int) -> str:
+    """The median over cases of a stage's light slant bias (``light_slant_bias``: < 0 where the
+    lights are read nearer the view axis than they are), or a dash where a result predates it."""
+    values = [r["stages"][stage].get("slant") for r in chosen]
+    return f"{np.median(values):>+7.2f}°" if values and None not in values else f"{'—':>8}"
+
+
 def summary(results: dict, stage_names: list[str]) -> str:
-    """Per group and light count: mean network and final error, their ratio, the flags."""
+    """Per group and light count: mean network and final error, their ratio, the flags, and the
+    median slant bias of the network's and the final lights."""
     lines = [f"\n{'group':<9} {'set':>4} {'cases':>5} {'network':>8} {'final':>8} {'ratio':>6} "
-             f"{'>1° raises':>10} {'>2° raises':>10} {'worst raise':>12}"]
+             f"{'>1° raises':>10} {'>2° raises':>10} {'worst raise':>12} {'slant, network':>14} {'final':>8}"]
     keys = sorted({(k[0], k[2]) for k in results}, key=lambda k: (GROUPS.index(k[0]), -int(k[1])))
     for group, label in keys:
         chosen = [r for k, r in results.items() if k[0] == group and k[2] == label]
@@ -219,7 +228,8 @@ def summary(results: dict, stage_names: list[str]) -> str:
                   for i, s in enumerate(r["stages"][1:])]
         lines.append(f"{group:<9} {label:>4} {len(chosen):>5} {network:>7.2f}° {final:>7.2f}° "
                      f"{final / network:>6.2f} {sum(x > RAISED for x in raises):>10} "
-                     f"{sum(x > RAISED_TWICE for x in raises):>10} {max(raises, default=0):>11.2f}°")
+                     f"{sum(x > RAISED_TWICE for x in raises):>10} {max(raises, default=0):>11.2f}° "
+                     f"{median_slant(chosen, 0):>14} {median_slant(chosen, -1)}")
     return "\n".join(lines)
 
 

@@ -2,6 +2,7 @@
 
     python experiments/light_benchmark/by_material.py --tags runI runP     # results of benchmark.py --tag …
     python experiments/light_benchmark/by_material.py --tags runP-default --final
+    python experiments/light_benchmark/by_material.py --tags runP-slant --slant [--final]  # which way
 
 Reads the network's direction error (the first stage of each case; with ``--final``, the last
 stage's) from ``<cache>/results/<tag>`` for the ``single`` group (``benchmark.py --only single``:
@@ -14,6 +15,10 @@ painted in two or three), and prints, per tag, the mean over the objects of each
   reads inside out (:data:`INSIDE_OUT`, whose 40–70° would swamp the rest);
 - **glossy**: the other single-material objects;
 - **painted**: the benchmark group, the same objects less :data:`INSIDE_OUT`.
+
+With ``--slant``, the lights' slant bias instead (``light_slant_bias``, recorded by
+``benchmark.py`` since 2026-12-01, late: < 0 where the lights are read nearer the view axis than
+they are).
 """
 
 from __future__ import annotations
@@ -66,22 +71,27 @@ def kinds(data: Path) -> dict[str, str]:
     return out
 
 
-def stage_errors(results: Path, group: str, final: bool = False) -> dict[tuple[str, str], float]:
-    """{(object, light set): the direction error after the network (or, ``final``, after the last
-    stage)} of one group in a results folder."""
+def stage_errors(results: Path, group: str, final: bool = False,
+                 key: str = "dir") -> dict[tuple[str, str], float]:
+    """{(object, light set): the direction error (``key="slant"``: the slant bias) after the
+    network (or, ``final``, after the last stage)} of one group in a results folder; a case whose
+    result has no such figure (made before it was recorded) is left out."""
     out = {}
     for path in results.glob(f"{group}-*.json"):
         name, label = path.stem[len(group) + 1:].rsplit("-", 1)
-        out[name, label] = json.loads(path.read_text())["stages"][-1 if final else 0]["dir"]
+        stage = json.loads(path.read_text())["stages"][-1 if final else 0]
+        if key in stage:
+            out[name, label] = stage[key]
     return out
 
 
-def means(errors: dict[tuple[str, str], float], names) -> str:
-    """'a / b / c°' over ``names`` under 96, 20 and 12 lights ('–' where a case is missing)."""
+def means(errors: dict[tuple[str, str], float], names, sign: str = "") -> str:
+    """'a / b / c°' over ``names`` under 96, 20 and 12 lights ('–' where a case is missing);
+    ``sign="+"`` writes the sign of each."""
     cells = []
     for label in scenes.LIGHT_SETS:
         values = [errors.get((name, label)) for name in names]
-        cells.append("–" if not values or None in values else f"{np.mean(values):.2f}")
+        cells.append("–" if not values or None in values else f"{np.mean(values):{sign}.2f}")
     return "–" if set(cells) == {"–"} else " / ".join(cells) + "°"
 
 
@@ -91,6 +101,8 @@ def main() -> None:
     parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
     parser.add_argument("--tags", nargs="+", required=True, help="results folders of benchmark.py --tag")
     parser.add_argument("--final", action="store_true", help="the last stage's error, not the network's")
+    parser.add_argument("--slant", action="store_true",
+                        help="the slant bias (< 0: lights read nearer the view axis), not the error")
     args = parser.parse_args()
     missing = [tag for tag in args.tags if not (args.cache / "results" / tag).is_dir()]
     if missing:
@@ -100,13 +112,14 @@ def main() -> None:
     glossy = sorted(n for n, k in kind.items() if k == "glossy")
     print(f"matte ({len(matte)}): {' '.join(matte)}\nglossy ({len(glossy)}): {' '.join(glossy)}\n"
           f"left out (read inside out by every network): {' '.join(INSIDE_OUT)}\n")
-    print(("final lights" if args.final else "network") + " (direction error under 96 / 20 / 12 lights)")
+    figure, key, sign = (("slant bias", "slant", "+") if args.slant else ("direction error", "dir", ""))
+    print(("final lights" if args.final else "network") + f" ({figure} under 96 / 20 / 12 lights)")
     print(f"{'tag':<16} {'one material, matte':>24} {'one material, glossy':>24} {'painted':>24}")
     for tag in args.tags:
         results = args.cache / "results" / tag
-        single, painted = (stage_errors(results, group, args.final) for group in ("single", "benchmark"))
-        print(f"{tag:<16} {means(single, matte):>24} {means(single, glossy):>24} "
-              f"{means(painted, matte + glossy):>24}")
+        single, painted = (stage_errors(results, group, args.final, key) for group in ("single", "benchmark"))
+        print(f"{tag:<16} {means(single, matte, sign):>24} {means(single, glossy, sign):>24} "
+              f"{means(painted, matte + glossy, sign):>24}")
 
 
 if __name__ == "__main__":

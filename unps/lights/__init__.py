@@ -8,7 +8,7 @@ from unps.data.lights import Lights
 from unps.data.subject import Subject
 from unps.errors import InputError
 from unps.io.files import atomic_path
-from unps.metrics import light_direction_mae, light_intensity_error
+from unps.metrics import light_direction_mae, light_intensity_error, light_slant_bias
 
 __all__ = ["Lights", "ground_truth", "light_errors", "with_lights", "write_lights"]
 
@@ -33,11 +33,13 @@ def with_lights(subject: Subject, lights: Lights) -> Subject:
 
 
 def light_errors(lights: Lights, subject: Subject) -> dict[str, float]:
-    """``light_dir_mae`` (degrees) and ``light_int_err`` (scale-invariant, on the mean of RGB)
-    of ``lights`` against the subject's own, those it has."""
+    """``light_dir_mae`` and ``light_slant_bias`` (degrees; :func:`unps.metrics.light_slant_bias`:
+    < 0 where the lights are read nearer the view axis than they are) and ``light_int_err``
+    (scale-invariant, on the mean of RGB) of ``lights`` against the subject's own, those it has."""
     errors = {}
     if subject.light_directions is not None:
         errors["light_dir_mae"] = light_direction_mae(lights.directions, subject.light_directions)
+        errors["light_slant_bias"] = light_slant_bias(lights.directions, subject.light_directions)
     if subject.light_intensities is not None and lights.intensities is not None:
         errors["light_int_err"] = light_intensity_error(lights.intensities.mean(1),
                                                         subject.light_intensities.mean(1))
