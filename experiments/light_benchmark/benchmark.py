@@ -126,6 +126,21 @@ def study_cases(args):
     return cases(args.only, args.sets, args.data, args.cache, args.names)
 
 
+def network_study(parser, args, out: Path, made_with: dict, run_case, report, progress) -> None:
+    """Run a study of the network's own lights (no stage after it): folder ``out`` claimed for
+    ``made_with`` and the shipped weights' digest, each case :func:`study_cases` gives run as
+    ``run_case(subject, network)`` and kept there (:func:`runs.summaries`; with ``--report`` only
+    those kept), and ``report(rows)`` printed."""
+    cases = study_cases(args)
+    try:
+        runs.claim(out, {**made_with, "weights": runs.weights_digest(None)})
+    except ValueError as e:
+        parser.error(str(e))
+    network, _ = light_source([], [])
+    print(report(runs.summaries(cases, out, lambda subject: run_case(subject, network), lambda r: r,
+                                progress, args.report)))
+
+
 def synthetic(name: str):
     return instantiate_node(["fit"], [f"subject={name}"], "subject")()
 

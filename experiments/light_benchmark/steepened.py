@@ -79,16 +79,9 @@ def main() -> None:
     parser = benchmark.study_parser(__doc__.split("\n")[0], "default: <cache>/steepened",
                                     groups=("benchmark", "single", "diligent"))
     args = parser.parse_args()
-    cases = benchmark.study_cases(args)
     out = args.out or args.cache / "steepened"
-    try:
-        runs.claim(out, {"scenes": scenes.SCENE_VERSION, "steps": list(STEPS),
-                         "weights": runs.weights_digest(None)})
-    except ValueError as e:
-        parser.error(str(e))
-    network, _ = benchmark.light_source([], [])
-    print(report(runs.summaries(cases, out, lambda subject: run_case(subject, network), lambda r: r,
-                                progress, args.report)))
+    made_with = {"scenes": scenes.SCENE_VERSION, "steps": list(STEPS)}
+    benchmark.network_study(parser, args, out, made_with, run_case, report, progress)
 
 
 if __name__ == "__main__":
