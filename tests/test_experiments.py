@@ -358,6 +358,30 @@ def test_steepened_study_reads_the_network_lights_slant_and_the_error_of_steepen
     assert last[:5] == ["diligent", "8", "1", "-2.00°", "-2.00°"] and last[5 + steepened.STEPS.index(2.0)] == "0.00*"
 
 
+def test_intensity_spread_scales_each_image_by_one_draw_and_reads_every_spread():
+    """Each image is scaled by one factor within the spread (none for ``equal``); every spread is
+    read, each from images scaled as it says."""
+    study = load_script("lb_intensity_spread", "experiments/light_benchmark/intensity_spread.py")
+    subject = render_lambertian(shape="sphere", size=24, n_lights=8, seed=0)
+    rng = np.random.default_rng(0)
+    assert study.rescaled(subject.images, None, rng) is subject.images
+    scaled = study.rescaled(subject.images, (0.2, 2.0), rng)
+    lit = subject.images > 0
+    factors = scaled[lit] / subject.images[lit]
+    per_image = [np.unique(np.round(scaled[i][lit[i]] / subject.images[i][lit[i]], 5)) for i in range(8)]
+    assert all(len(f) == 1 and 0.2 <= f[0] <= 2.0 for f in per_image) and factors.std() > 0.1
+    seen = []
+
+    def network(s):
+        seen.append(float(s.images.sum()))
+        return Lights(subject.light_directions, None, "estimated")
+    figures = study.read_spreads(subject, network, draws=2)
+    assert list(figures) == list(study.SPREADS) and len(seen) == 1 + 2 * 2
+    assert all(slant == pytest.approx(0, abs=1e-6) and error == pytest.approx(0, abs=1e-3)
+               for slant, error in figures.values())
+    assert seen[0] == pytest.approx(float(subject.images.sum())) and len(set(np.round(seen, 3))) == 5
+
+
 def test_slant_script_remeasures_runs_and_their_seed_ensemble(tmp_path, capsys, monkeypatch):
     """Two seeds of a fit, one 2° steeper and one 2° flatter than the truth: each reads ±2°, and
     their ensemble is the truth."""
