@@ -316,8 +316,10 @@ def test_light_benchmark_normals_reads_finished_rows_refuses_mixed_settings_and_
         ["mean,", "png16", "(2)", "1.50°", "2.00°"], ["mean,", "floor8", "(1)", "5.00°", "4.00°"]]
     normals.runs.claim(tmp_path, ["preset.prior_weight=0"])
     normals.runs.claim(tmp_path, ["preset.prior_weight=0"])
-    with pytest.raises(ValueError, match=r'made with \["preset.prior_weight=0"\], not \[\]'):
+    with pytest.raises(ValueError, match=r'made with \["preset.prior_weight=0"\], not \[\]: give another --tag'):
         normals.runs.claim(tmp_path, [])
+    with pytest.raises(ValueError, match=r'not \[\]: delete the folder to run the study again$'):
+        normals.runs.claim(tmp_path, [], way_out="delete the folder to run the study again")
     with pytest.raises(ValueError, match=r'not \["light=selfcal", "preset.prior_weight=0", '
                                          r'"light-network weights [0-9a-f]{12}"\]'):
         normals.runs.claim(tmp_path, normals.made_with("selfcal", ["preset.prior_weight=0"]))

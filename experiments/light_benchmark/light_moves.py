@@ -148,9 +148,10 @@ def selfcal_moves(args) -> None:
     """The self-calibration's move on each case, split as :func:`decompose` splits it."""
     out = args.cache / "results" / "selfcal_moves"
     try:
-        runs.claim(out, {"scenes": scenes.SCENE_VERSION, "weights": runs.weights_digest(None)})
+        runs.claim(out, {"scenes": scenes.SCENE_VERSION, "weights": runs.weights_digest(None)},
+                   way_out="delete the folder to run the study again")
     except ValueError as e:
-        sys.exit(f"{e} (this study has no --tag: delete the folder to start it again)")
+        sys.exit(str(e))
     network, _ = benchmark.light_source(["reversal"], [])
     selfcal = benchmark.instantiate_node(["fit"], ["light=selfcal"], "light.selfcal")()
 

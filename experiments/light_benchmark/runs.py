@@ -30,20 +30,20 @@ def weights_digest(checkpoint: str | None) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()[:12]
 
 
-def claim(out: Path, made_with) -> None:
+def claim(out: Path, made_with, way_out: str = "give another --tag or --out") -> None:
     """Record in run folder ``out`` what its results are made with (any JSON value) on first use;
     later, refuse anything else, so that a folder never mixes rows made with different settings
     and a rerun resumes only its own.
 
     Raises:
-        ValueError: ``out`` holds results made otherwise; the message names both and the way out.
+        ValueError: ``out`` holds results made otherwise; the message names both and ``way_out``.
     """
     recorded = out / "settings.json"
     if recorded.is_file():
         before = json.loads(recorded.read_text())
         if before != made_with:
             raise ValueError(f"{out} holds results made with {json.dumps(before)}, not "
-                             f"{json.dumps(made_with)}: give another --tag or --out")
+                             f"{json.dumps(made_with)}: {way_out}")
         return
     out.mkdir(parents=True, exist_ok=True)
     recorded.write_text(json.dumps(made_with) + "\n")
