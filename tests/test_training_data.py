@@ -291,6 +291,27 @@ def test_a_second_material_lies_in_patches_over_the_same_scene():
     assert all(plain.draw(index).second is None for index in range(8))
 
 
+def test_narrowed_intensities_draw_stacks_from_equal_lamps_to_the_whole_range():
+    """A narrowed stack's intensities spread over a part of U(0.2, 2) drawn per stack, down to
+    every lamp alike; the scene's lights are the same draws; the rest keep the whole range."""
+    common = dict(resolution=32, images=16, camera=None)
+    plain, narrowed = LightDataset(24, **common), LightDataset(24, narrowed_intensities=1.0, **common)
+    ratios = {}
+    for name, dataset in (("plain", plain), ("narrowed", narrowed)):
+        scenes = [dataset.draw(index) for index in range(24)]
+        assert all(((s.intensities >= 0.2) & (s.intensities <= 2.0)).all() for s in scenes)
+        ratios[name] = [float(s.intensities.max() / s.intensities.min()) for s in scenes]
+    for index in range(24):
+        torch.testing.assert_close(plain.draw(index).lights, narrowed.draw(index).lights)
+    assert min(ratios["plain"]) > 2.5
+    assert min(ratios["narrowed"]) < 1.3 and np.median(ratios["narrowed"]) < np.median(ratios["plain"])
+    half = LightDataset(24, narrowed_intensities=0.5, **common)
+    half_ratios = [float(half.draw(i).intensities.max() / half.draw(i).intensities.min()) for i in range(24)]
+    assert sum(r < 2.5 for r in half_ratios) not in (0, 24)
+    with pytest.raises(InputError, match="narrowed_intensities is a share"):
+        LightDataset(2, resolution=32, narrowed_intensities=1.5)
+
+
 def test_a_darkened_material_keeps_its_lobes():
     brdf = AnalyticBRDF([0.5, 0.4, 0.3], [[0.2, 0.2, 0.2], [0.1, 0.1, 0.1]], (0.1, 0.4), (0.04, 0.05))
     dark = darkened(brdf, 0.01)

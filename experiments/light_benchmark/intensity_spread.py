@@ -2,9 +2,12 @@
 
     python experiments/light_benchmark/intensity_spread.py     # DiLiGenT's three, unps's renders: ~5 min
     python experiments/light_benchmark/intensity_spread.py --draws 5 --subjects Sphere Face
+    python experiments/light_benchmark/intensity_spread.py --set checkpoint=W.pt   # other weights
 
 The network is trained on stacks whose lights' intensities are drawn from U(0.2, 2) image by
-image (``unps.lightnet.synthesis``); real rigs spread far less. Per subject (DiLiGenT's three at 96
+image (``unps.lightnet.synthesis``). DiLiGenT's dome spreads as widely (0.38-2.3, a relative
+spread of 0.48 against U(0.2, 2)'s 0.47); rigs of matched lamps, the light benchmark's renders
+(U(0.6, 1.4)) and unps's subjects (U(0.5, 1.5)) spread less. Per subject (DiLiGenT's three at 96
 images, unps's renders of ``--subjects``), its images divided by their own lights' intensities
 (``Subject.images``) are read by the network (``light=selfcal``'s first stage, eight passes) as
 they are — every light equally bright — and after each image is scaled by an intensity drawn
@@ -64,16 +67,23 @@ def main() -> None:
     parser.add_argument("--subjects", nargs="*", default=list(RENDERS),
                         help="unps's rendered subjects to read beside DiLiGenT's three")
     parser.add_argument("--draws", type=int, default=3, help="draws of the intensities per spread")
+    parser.add_argument("--set", dest="settings", nargs="*", default=[],
+                        help="light.<key>=<value> overrides, e.g. checkpoint=W.pt")
     parser.add_argument("--threads", type=int, default=1)
     args = parser.parse_args()
     if args.draws < 1:
         parser.error(f"--draws must be at least 1, got {args.draws}")
     logging.basicConfig(level=logging.ERROR)
     torch.set_num_threads(args.threads)
-    network, _ = benchmark.light_source([], [])
+    try:
+        weights = benchmark.weights_used(args.settings)
+    except InputError as e:
+        parser.error(str(e))
+    network, _ = benchmark.light_source([], args.settings)
     cases = [(name, read) for _, name, _, read in benchmark.cases(["diligent"], ["96"], args.data, None)]
     cases += [(name, lambda name=name: benchmark.synthetic(name)) for name in args.subjects]
-    print("slant bias / direction error of the network's lights, the images' intensities drawn from:")
+    print(f"slant bias / direction error of the network's lights (weights {weights}), "
+          "the images' intensities drawn from:")
     print(f"{'subject':<12}" + "".join(f"{name:>20}" for name in SPREADS))
     rows = []
     for name, read in cases:

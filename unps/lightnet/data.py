@@ -30,7 +30,7 @@ class LightData(L.LightningDataModule):
         data: ``meshes_dir``, ``views_per_mesh``, ``lights_per_shape``, ``max_zenith_deg``,
             ``materials``, ``mesh_fraction``, ``texture``, ``perturbation``, ``saturation``,
             ``shapes``, ``layouts``, ``paint``, ``second_material``, ``interreflection``,
-            ``camera`` (the ``data`` node of ``unps/conf/train.yaml``).
+            ``narrowed_intensities``, ``camera`` (the ``data`` node of ``unps/conf/train.yaml``).
             ``recipe.workers`` null takes :func:`loader_workers` of this machine's CPUs.
         seed: the run's seed.
         start_step: the step training resumes from; its first ``start_step · batch_size`` items
@@ -58,8 +58,8 @@ class LightData(L.LightningDataModule):
         recipe, data = self.recipe, self.data
         meshes = (mesh_views(data.meshes_dir, recipe.resolution, data.views_per_mesh, self.seed)
                   if data.meshes_dir else None)
-        # shapes, layouts, paint, second_material, interreflection, camera: .get, as the configs of
-        # older runs lack them
+        # shapes, layouts, paint, second_material, interreflection, narrowed_intensities, camera:
+        # .get, as the configs of older runs lack them
         common = dict(resolution=recipe.resolution, images=recipe.images,
                       lights_per_shape=data.lights_per_shape, max_zenith_deg=data.max_zenith_deg,
                       materials=MaterialBank(**data.materials), meshes=meshes,
@@ -68,6 +68,7 @@ class LightData(L.LightningDataModule):
                       shapes=data.get("shapes"), layouts=data.get("layouts"),
                       paint=data.get("paint", 0.0), second_material=data.get("second_material", 0.0),
                       interreflection=data.get("interreflection", 0.0),
+                      narrowed_intensities=data.get("narrowed_intensities", 0.0),
                       camera=camera(data.get("camera")), device=self.device)
         done = self.start_step * recipe.batch_size
         remaining = max(recipe.max_steps * recipe.batch_size - done, recipe.batch_size)

@@ -58,6 +58,9 @@ class LightDataset(Dataset):
             first, its diffuse albedo darkened by up to a hundredth (:data:`DARKEST_SECOND`), laid
             on in patches (:func:`~unps.lightnet.materials.coated`): objects of two materials, a
             dark glossy one beside a bright one, as many captures are.
+        narrowed_intensities: share of samples whose lights' intensities spread less than
+            ``intensity_range``: the range shrunk toward 1 by a factor drawn from U(0, 1), from
+            every light equally bright to the whole range, as rigs of matched lamps give.
         interreflection: share of samples whose facets light each other
             (:func:`~unps.lightnet.interreflection.interreflected`): cavities and the foot of a
             wall filled with light bounced off the rest of the object, as in real captures.
@@ -91,7 +94,7 @@ class LightDataset(Dataset):
                  camera: Camera | None = None, seed: int = 0, family: str | None = None,
                  shape: str | None = None, offset: int = 0, paint: float = 0.0,
                  second_material: float = 0.0, interreflection: float = 0.0,
-                 device: torch.device = torch.device("cpu")):
+                 narrowed_intensities: float = 0.0, device: torch.device = torch.device("cpu")):
         if resolution % 32 or resolution < 32:
             raise InputError(f"resolution must be a multiple of 32, got {resolution}")
         if not 1 <= images <= lights_per_shape:
@@ -102,6 +105,9 @@ class LightDataset(Dataset):
             raise InputError(f"second_material is a share of the samples, in 0…1; got {second_material}")
         if not 0 <= interreflection <= 1:
             raise InputError(f"interreflection is a share of the samples, in 0…1; got {interreflection}")
+        if not 0 <= narrowed_intensities <= 1:
+            raise InputError("narrowed_intensities is a share of the samples, in 0…1; "
+                             f"got {narrowed_intensities}")
         self.shapes = dict(shapes) if shapes else {"blob": 1.0}
         self.layouts = dict(layouts) if layouts else {"cap": 1.0}
         check_weights(self.shapes, SHAPES, "shape families")
@@ -116,6 +122,7 @@ class LightDataset(Dataset):
         self.texture, self.paint, self.perturbation = texture, paint, perturbation
         self.second_material, self.interreflection = second_material, interreflection
         self.intensity_range, self.seed, self.family = intensity_range, seed, family
+        self.narrowed_intensities = narrowed_intensities
         self.offset, self.saturation, self.device = offset, saturation, torch.device(device)
 
     def __len__(self) -> int:
@@ -141,6 +148,9 @@ class LightDataset(Dataset):
         lights = draw_lights(self.layouts, self.lights_per_shape, self.max_zenith_deg, g)
         pick = torch.randperm(self.lights_per_shape, generator=g)[: self.images]
         lo, hi = self.intensity_range
+        if self.narrowed_intensities > 0 and float(u(1)) < self.narrowed_intensities:
+            spread = float(u(1))
+            lo, hi = 1 + spread * (lo - 1), 1 + spread * (hi - 1)
         intensities = lo + (hi - lo) * u(self.images)
         albedo = None
         if self.texture > 0:
