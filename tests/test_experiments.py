@@ -384,6 +384,16 @@ def test_intensity_spread_scales_each_image_by_one_draw_and_reads_every_spread()
     assert seen[0] == pytest.approx(float(subject.images.sum())) and len(set(np.round(seen, 3))) == 5
 
 
+def test_intensity_spread_refuses_weights_that_are_not_there(tmp_path, capsys, monkeypatch):
+    study = load_script("lb_intensity_spread", "experiments/light_benchmark/intensity_spread.py")
+    missing = tmp_path / "nope.pt"
+    monkeypatch.setattr(sys, "argv", ["intensity_spread.py", "--set", f"checkpoint={missing}"])
+    with pytest.raises(SystemExit) as stop:
+        study.main()
+    assert stop.value.code == 2
+    assert f"{missing}: light-network weights not found" in capsys.readouterr().err
+
+
 def test_slant_script_remeasures_runs_and_their_seed_ensemble(tmp_path, capsys, monkeypatch):
     """Two seeds of a fit, one 2° steeper and one 2° flatter than the truth: each reads ±2°, and
     their ensemble is the truth."""

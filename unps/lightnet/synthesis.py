@@ -58,12 +58,12 @@ class LightDataset(Dataset):
             first, its diffuse albedo darkened by up to a hundredth (:data:`DARKEST_SECOND`), laid
             on in patches (:func:`~unps.lightnet.materials.coated`): objects of two materials, a
             dark glossy one beside a bright one, as many captures are.
-        narrowed_intensities: share of samples whose lights' intensities spread less than
-            ``intensity_range``: the range shrunk toward 1 by a factor drawn from U(0, 1), from
-            every light equally bright to the whole range, as rigs of matched lamps give.
         interreflection: share of samples whose facets light each other
             (:func:`~unps.lightnet.interreflection.interreflected`): cavities and the foot of a
             wall filled with light bounced off the rest of the object, as in real captures.
+        narrowed_intensities: share of samples whose lights' intensities spread less than
+            ``intensity_range``: the range shrunk toward 1 by a factor drawn from U(0, 1), from
+            every light equally bright to the whole range, as rigs of matched lamps give.
         perturbation: half-width of the uniform noise added to images scaled to a 99th
             percentile of 1.
         saturation: the level, in units of that 99th percentile, where the simulated camera
@@ -99,15 +99,11 @@ class LightDataset(Dataset):
             raise InputError(f"resolution must be a multiple of 32, got {resolution}")
         if not 1 <= images <= lights_per_shape:
             raise InputError(f"images per sample must lie in 1…{lights_per_shape}, got {images}")
-        if not 0 <= paint <= 1:
-            raise InputError(f"paint is a share of the samples, in 0…1; got {paint}")
-        if not 0 <= second_material <= 1:
-            raise InputError(f"second_material is a share of the samples, in 0…1; got {second_material}")
-        if not 0 <= interreflection <= 1:
-            raise InputError(f"interreflection is a share of the samples, in 0…1; got {interreflection}")
-        if not 0 <= narrowed_intensities <= 1:
-            raise InputError("narrowed_intensities is a share of the samples, in 0…1; "
-                             f"got {narrowed_intensities}")
+        shares = dict(paint=paint, second_material=second_material, interreflection=interreflection,
+                      narrowed_intensities=narrowed_intensities)
+        for name, share in shares.items():
+            if not 0 <= share <= 1:
+                raise InputError(f"{name} is a share of the samples, in 0…1; got {share}")
         self.shapes = dict(shapes) if shapes else {"blob": 1.0}
         self.layouts = dict(layouts) if layouts else {"cap": 1.0}
         check_weights(self.shapes, SHAPES, "shape families")
