@@ -15,7 +15,8 @@ from unps.lights.selfcal import SelfCalibration, self_calibrate
 from unps.metrics import angular_error
 
 QUICK = SelfCalibration(steps=600, max_pixels=1200)
-FREE = dict(prior_weight=0.0)       # no pull toward the first guess: what the images alone say
+FREE = dict(prior_weight=0.0, max_flattening_deg=None)     # what the images alone say: no pull toward
+                                                            # the first guess, no fit declined
 ROTATION_RECOVERY = SelfCalibration(steps=1500, max_pixels=1600, **FREE)
 
 
@@ -293,6 +294,39 @@ def test_a_fit_that_diverges_between_reads_of_its_loss_is_declined_all_the_same(
     start = rotated(glossy, 10)
     kept, verdict = self_calibrate(glossy, start, SelfCalibration(steps=20, max_pixels=600))
     assert kept is start and verdict.outcome == "declined" and "diverged" in verdict.reason
+
+
+def turned_from_the_view(subject: Subject, degrees: float) -> Lights:
+    """The subject's lights, each turned ``degrees`` further from the view axis +z (< 0: nearer)."""
+    d = subject.light_directions.astype(np.float64)
+    slant = np.arccos(np.clip(d[:, 2], -1, 1)) + np.radians(degrees)
+    planar = d[:, :2] / np.linalg.norm(d[:, :2], axis=1, keepdims=True)
+    turned = np.column_stack([planar * np.sin(slant)[:, None], np.cos(slant)])
+    return Lights(turned.astype(np.float32), None, f"turned {degrees:+g}°")
+
+
+@pytest.mark.slow
+def test_a_fit_that_takes_the_lights_nearer_the_view_axis_is_declined(glossy, caplog):
+    """Read 4° too grazing, the lights are fitted back toward the view axis: that flattening is
+    declined by default, kept with ``max_flattening_deg=None``; read 4° too flat, they are fitted
+    away from it and kept. Free of the pull toward the first guess, the fit's first few hundred
+    steps take the lights toward the view axis from any start (from the true lights 3.4° in 300
+    steps, 0.9° by step 1500), so the fit runs until the lights settle."""
+    settings = dict(steps=1000, max_pixels=600, prior_weight=0.0)
+    steep = turned_from_the_view(glossy, 4)
+    kept, verdict = self_calibrate(glossy, steep, SelfCalibration(**settings))
+    assert kept is steep and verdict.outcome == "declined"
+    assert verdict.evidence["flattened_deg"] > 1.0 and "nearer the view axis" in verdict.reason
+    assert "keeping the network's lights" in caplog.text
+    fitted, verdict = self_calibrate(glossy, steep, SelfCalibration(**settings, max_flattening_deg=None))
+    assert verdict.outcome == "changed"
+    assert light_errors(fitted, glossy)["light_dir_mae"] < light_errors(steep, glossy)["light_dir_mae"] - 1
+    flat = turned_from_the_view(glossy, -4)
+    fitted, verdict = self_calibrate(glossy, flat, SelfCalibration(**settings))
+    assert verdict.outcome == "changed" and verdict.evidence["flattened_deg"] < -1.0
+    assert light_errors(fitted, glossy)["light_dir_mae"] < light_errors(flat, glossy)["light_dir_mae"] - 1
+    with pytest.raises(InputError, match="max_flattening_deg must be a number of degrees >= 0, or null"):
+        self_calibrate(glossy, flat, SelfCalibration(max_flattening_deg=-1))
 
 
 def test_the_pull_toward_the_network_loosens_where_its_passes_disagree():

@@ -194,7 +194,7 @@ def run_case(source, subject) -> dict:
         total = time.perf_counter() - start
     stages = [{"stage": v.stage, "outcome": v.outcome, "dir": v.errors["light_dir_mae"],
                "slant": v.errors["light_slant_bias"], "int": v.errors.get("light_int_err"),
-               "reason": v.reason} for v in lights.verdicts]
+               "reason": v.reason, "evidence": v.evidence} for v in lights.verdicts]
     return {"stages": stages, "seconds": total, "stage_seconds": dict(seconds),
             "n_images": subject.n_images}
 

@@ -17,7 +17,8 @@ enough for a CPU:
    every ``shadows_every`` steps;
 3. the lights are held near the first guess, each as far as the light network was sure of it
    (:mod:`unps.lights.prior`): they move where the images pin them, and only there. A fit that
-   diverges returns the first guess; one that moved the lights far from it warns.
+   diverges returns the first guess, and so does one that leaves the lights nearer the view axis
+   than the first guess (:func:`flattening`); one that moved the lights far from it warns.
 
 Frame: x right (+col), y up (−row), z toward the camera; orthographic view along +z.
 """
@@ -43,7 +44,7 @@ from unps.lights import Lights, with_lights
 from unps.lights.factorization import normals_under
 from unps.lights.model import SelfCalibrationModel
 from unps.lights.prior import NetworkPrior, network_prior
-from unps.metrics import angular_error
+from unps.metrics import angular_error, light_slant_bias
 
 log = logging.getLogger(__name__)
 
@@ -96,6 +97,14 @@ class SelfCalibration:
             (:mod:`unps.lights.prior`); 0: none.
         prior_floor_deg: σ₀, the first guess's error where the network's passes agree.
         prior_intensity: σ_e, the first guess's relative intensity error.
+        max_flattening_deg: decline the fit (keep the first guess) when it leaves the lights
+            nearer the view axis than the first guess by more than this (degrees, mean over the
+            lights, :func:`flattening`); None: never. The light network already reads lights
+            nearer the view axis than they are, never further on the whole, so a fit that
+            flattens them further has bought its loss along the bas-relief the images pin
+            least: on the light benchmark every rise of the error above 1° came with a flattening
+            above 1.4°, and the one other case flattened by more than 1° gained 0.7°
+            (``experiments/light_benchmark/README.md``, "Lights the fit flattens").
         log_every: steps between progress lines.
         device: where the fit runs (the run's ``device=``, :func:`unps.device.resolve_device`).
     """
@@ -117,6 +126,7 @@ class SelfCalibration:
     prior_weight: float = 0.003
     prior_floor_deg: float = 3.0
     prior_intensity: float = 0.1
+    max_flattening_deg: float | None = 1.0
     log_every: int = 500
     device: str = "auto"
 
@@ -148,6 +158,9 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
     if not settings.settle_deg >= 0:
         raise InputError(f"light.selfcal.settle_deg must be a number of degrees >= 0 (0: run every "
                          f"step), got {settings.settle_deg}")
+    if settings.max_flattening_deg is not None and not settings.max_flattening_deg >= 0:
+        raise InputError(f"light.selfcal.max_flattening_deg must be a number of degrees >= 0, or null "
+                         f"(never decline), got {settings.max_flattening_deg}")
     if settings.shadows_every < 0 or int(settings.shadows_every) != settings.shadows_every:
         raise InputError(f"light.selfcal.shadows_every must be a whole number of steps >= 0 (0: no "
                          f"cast shadows), got {settings.shadows_every}")
@@ -183,12 +196,23 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
         return lights, Verdict(settings.name, "declined", "the fit diverged",
                                {"loss": loss, "steps": steps})
     moved = float(angular_error(directions, lights.directions).mean())
-    evidence = {"loss": loss, "prior": pull, "moved_deg": moved, "steps": steps}
+    flattened = flattening(directions, lights.directions)
+    evidence = {"loss": loss, "prior": pull, "moved_deg": moved, "flattened_deg": flattened,
+                "steps": steps}
     if weight is not None:
         evidence["black_share"] = float(1 - weight.mean())
     log.info("self-calibrated %d lights on %d pixels in %d steps (%.1f s): loss %.4g, pull toward "
-             "the first guess %.4g; directions moved %.2f° on average", subject.n_images,
-             int(grid.mask.sum()), steps, time.perf_counter() - start, loss, pull, moved)
+             "the first guess %.4g; directions moved %.2f° on average, %+.2f° nearer the view axis",
+             subject.n_images, int(grid.mask.sum()), steps, time.perf_counter() - start, loss, pull,
+             moved, flattened)
+    if settings.max_flattening_deg is not None and flattened > settings.max_flattening_deg:
+        log.warning("self-calibration of %s took the lights %.2f° nearer the view axis than the "
+                    "light network's (more than light.selfcal.max_flattening_deg=%g); keeping the "
+                    "network's lights", subject.name, flattened, settings.max_flattening_deg)
+        return lights, Verdict(settings.name, "declined",
+                               f"the fit took the lights {flattened:.2f}° nearer the view axis on average "
+                               f"(more than {settings.max_flattening_deg:g}°), along the bas-relief the "
+                               f"images pin least (directions moved {moved:.2f}°)", evidence)
     if moved > MOVED_WARNING:
         log.warning("self-calibration moved the lights %.1f° on average from the light network's "
                     "estimate: the images and the network disagree, and either may be wrong; check "
@@ -202,6 +226,21 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
     return fitted, Verdict(settings.name, "changed", f"fitted to the images{how} (loss {loss:.4g}, "
                            f"pull toward the first guess {pull:.4g}); directions moved {moved:.2f}° "
                            f"on average", evidence)
+
+
+def flattening(directions: np.ndarray, first_guess: np.ndarray) -> float:
+    """How much nearer the view axis +z the fitted lights are than the first guess: minus the mean
+    signed change of their angle from the view axis (:func:`unps.metrics.light_slant_bias` of the
+    fit read against the first guess), in degrees; < 0 where the fit steepened them.
+
+    Args:
+        directions, first_guess: (n, 3) directions of the same lights.
+
+    >>> guess = np.array([[np.sin(np.radians(30)), 0.0, np.cos(np.radians(30))]])
+    >>> round(flattening(np.array([[np.sin(np.radians(27)), 0.0, np.cos(np.radians(27))]]), guess), 6)
+    3.0
+    """
+    return -light_slant_bias(directions, first_guess)
 
 
 def working_grid(observed: Subject, scaled_normals: np.ndarray, max_pixels: int) -> Subject:
