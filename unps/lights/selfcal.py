@@ -102,9 +102,10 @@ class SelfCalibration:
             lights, :func:`flattening`); None: never. The light network already reads lights
             nearer the view axis than they are, never further on the whole, so a fit that
             flattens them further has bought its loss along the bas-relief the images pin
-            least: on the light benchmark every rise of the error above 1° came with a flattening
-            above 1.4°, and the one other case flattened by more than 1° gained 0.7°
-            (``experiments/light_benchmark/README.md``, "Lights the fit flattens").
+            least: on the light benchmark each of the six fits that raised the error by more
+            than 1° had flattened the lights by 1.36–3.35°; the rule also declines four fits
+            that gained 0.7–2.1° (flattened 1.27–1.56°, a turn about the view axis counting
+            toward it) (``experiments/light_benchmark/README.md``, "Lights the fit flattens").
         log_every: steps between progress lines.
         device: where the fit runs (the run's ``device=``, :func:`unps.device.resolve_device`).
     """
