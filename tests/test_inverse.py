@@ -23,12 +23,13 @@ from unps.inverse.fit import (FAR_FROM_START_DEG, build_system, distance_from_st
                               interreflection_bend, neural_inverse_rendering, solved_per_pixel, unit,
                               with_surface_continued)
 from unps.inverse.settings import InterreflectionModel, Preset
-from unps.inverse.grids import unclipped, upsample_normals, upsample_with_detail, working_factor
+from unps.inverse.grids import (black_headroom, unclipped, upsample_normals, upsample_with_detail,
+                               working_factor)
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet, normal_net_input, shading, specular_map
 from unps.inverse.system import InverseRendering, residual_weight, visibility
 from unps.lights.contour import best_rotation, rotation_angle
-from unps.metrics import angular_error
+from unps.metrics import angular_error, slant_bias
 from unps.pipeline.run import learns_lights
 
 NAYAR = dict(downsample=2, occlusion=True, albedo=None)
@@ -829,6 +830,70 @@ def test_clipped_values_are_found_on_the_working_grid():
     usable = unclipped(clipped_values(cropped.observed_images(), cropped.mask), cropped.mask, 2)
     assert usable is not None and 0 < (usable == 0).mean() < 0.5
     assert unclipped(clipped_values(plain.observed_images(), plain.mask), plain.mask, 1) is None
+
+
+def test_a_values_headroom_is_its_blocks_share_of_zeros_times_the_ceiling_over_the_intensity():
+    observed = np.full((2, 4, 4, 3), 0.2, np.float32)
+    observed[0, 0, 0] = 0                  # one pixel of the first image's top-left block, every channel
+    observed[0, 1, 1, 0] = 0               # another of that block, red only
+    observed[1, 3, 3] = 0                  # off the mask: no reading at all
+    mask = np.ones((4, 4), bool)
+    mask[3, 3] = False
+    intensities = np.array([[1, 2, 4], [1, 1, 1]], np.float32)
+    headroom = black_headroom(observed, mask, 2, 0.01, intensities)
+    assert headroom.shape == (2, 2, 2, 3)
+    np.testing.assert_allclose(headroom[0, 0, 0], [0.5 * 0.01, 0.25 * 0.01 / 2, 0.25 * 0.01 / 4])
+    headroom[0, 0, 0] = 0
+    assert not headroom.any()
+    at_full_size = black_headroom(observed, mask, 1, 0.01, None)
+    np.testing.assert_allclose(at_full_size[0, 1, 1], [0.01, 0, 0])
+    assert at_full_size.sum() == pytest.approx(0.01 * 4)
+    assert black_headroom(observed + 0.1, mask, 2, 0.01, intensities) is None
+
+
+def test_values_read_as_zero_cost_only_what_the_rendering_puts_above_their_headroom():
+    """A headroom of 0 is the plain L1 loss, bit for bit; one wider than any rendering takes the
+    values read as 0 out of what the loss charges, whatever is rendered there."""
+    torch.manual_seed(0)
+    system, subject = sphere_system(prior_weight=0.0)
+    system.images[:, :, 8:14, 8:14] = 0.0
+
+    def loss(headroom):
+        system.headroom = headroom
+        torch.manual_seed(3)
+        with torch.no_grad():               # step 0 logs nothing (figures_read), so needs no trainer
+            return system.training_step(None, 0).item()
+
+    plain = loss(None)
+    assert loss(torch.zeros_like(system.images)) == plain
+    wide = torch.zeros_like(system.images)
+    wide[:, :, 8:14, 8:14] = 50.0
+    censored = loss(wide)
+    assert censored < plain
+    with torch.no_grad():
+        system.reflectance_net.out.bias += 2.0      # renders brighter everywhere, the zeros included
+    assert loss(None) - loss(wide) > 2 * (plain - censored)
+
+
+@pytest.mark.slow
+def test_a_dark_8bit_capture_is_not_fitted_steeper_than_it_is_when_zeros_are_censored():
+    """A sphere exposed to six 8-bit levels (floor, as DiLiGenT's crops): read as no light at
+    all, the zeros of its grazing lights pull the normals away from those lights (5° too steep);
+    read as light below the first level, they do not."""
+    sphere = render_lambertian("sphere", size=24, n_lights=24, textured=True, seed=3)
+    levels = np.floor(sphere.images / np.percentile(sphere.images[:, sphere.mask], 99) * 6)
+    dark = sphere.replace(images=(np.where(levels > 0, levels + 0.5, 0) / 255).astype(np.float32))
+    fitted = {}
+    for censor in (False, True):
+        torch.manual_seed(0)
+        preset = Preset.from_config(**{**TINY, "steps": 200, "lr_drop_at": 180, "update_every": 50,
+                                       "pixel_keep": 1.0, "censor_black": censor})
+        normals = neural_inverse_rendering(dark, sphere.light_directions, preset,
+                                           InterreflectionModel(enabled=False)).normals
+        fitted[censor] = (angular_error(normals, sphere.normals)[sphere.mask].mean(),
+                          slant_bias(normals, sphere.normals, sphere.mask))
+    assert fitted[False][1] > 3 and fitted[False][0] > 4, fitted
+    assert abs(fitted[True][1]) < 2 and fitted[True][0] < 0.5 * fitted[False][0], fitted
 
 
 def scalars(run) -> dict[str, list[tuple[int, float]]]:

@@ -159,6 +159,31 @@ def first_level(images: np.ndarray, mask: np.ndarray) -> float | None:
     return None if first == 0.0 or first > FIRST_LEVEL_AT_MOST else first
 
 
+def zero_ceiling(images: np.ndarray, mask: np.ndarray) -> float | None:
+    """The light below which a value of the stack reads 0: its first level (:func:`first_level`)
+    less half the step to the next one, which is where the encoder's rounding or truncation
+    switches from 0 to the first level (1/255 for 8-bit files read as ``floor``, whose level k > 0
+    reads k + ½; ½/255 read as ``round``); None where the stack has no first level.
+
+    Args:
+        images: (n, H, W, 3) as captured; mask: (H, W) bool.
+
+    Example:
+        >>> floor_read = np.array([0, 1.5, 2.5, 3.5], float).reshape(1, 1, 4, 1).repeat(3, -1) / 255
+        >>> round(zero_ceiling(floor_read, np.ones((1, 4), bool)) * 255, 6)
+        1.0
+        >>> round(zero_ceiling(floor_read - 0.5 / 255 * (floor_read > 0), np.ones((1, 4), bool)) * 255, 6)
+        0.5
+    """
+    first = first_level(images, mask)
+    if first is None:
+        return None
+    values = images[:, mask]
+    above = values[values > first * (1 + 1e-3)]             # past float rounding of the first level
+    step = min(float(above.min()) - first, first) if above.size else first
+    return first - step / 2
+
+
 def value_levels(images: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per image, the share of object pixels clipped (:func:`clipped_values`) and the share that
     are black (every channel 0).

@@ -23,14 +23,15 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from unps.data.checks import black_everywhere, clipped_values
+from unps.data.checks import black_everywhere, clipped_values, zero_ceiling
 from unps.data.estimate import Estimate, Rendering
 from unps.data.subject import Subject
 from unps.device import native_bfloat16, resolve_device
 from unps.errors import InputError
 from unps.geometry import continue_surface
 from unps.inverse.control import fingerprint, train
-from unps.inverse.grids import on_subject_grid, unclipped, upsample_map, upsample_with_detail, working_factor
+from unps.inverse.grids import (black_headroom, on_subject_grid, unclipped, upsample_map,
+                               upsample_with_detail, working_factor)
 from unps.inverse.highlights import highlight_normals
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet
@@ -84,14 +85,23 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
     observed = cropped.observed_images()
     clipped = clipped_values(observed, cropped.mask)
     black = black_everywhere(observed, cropped.mask)
+    ceiling = zero_ceiling(observed, cropped.mask) if schedule.censor_black else None
+    headroom = (None if ceiling is None else
+                black_headroom(observed, cropped.mask, factor, ceiling, cropped.light_intensities))
     del observed
+    censored_share = None if headroom is None else float((headroom[:, work.mask] > 0).mean())
+    if censored_share:
+        log.info("%.1f%% of the values on the working grid hold pixels read as 0, which stand for any "
+                 "light below the first level (%.2g of full scale): the loss charges a rendering there "
+                 "only for what it puts above that (preset.censor_black)", 100 * censored_share, ceiling)
     usable = unclipped(clipped, cropped.mask, factor)
     if usable is not None:
         log.info("%d of %d values on the working grid hold clipped pixels and are left out of the fit",
                  int((usable[:, work.mask] == 0).sum()), usable[:, work.mask].size)
     with stage("system assembly"):
         system, scale = build_system(work, light_directions, preset, interreflection, refine_lights,
-                                     fingerprint(work, light_directions, settings), usable, device)
+                                     fingerprint(work, light_directions, settings), usable, headroom,
+                                     device)
     solver = system.interreflection
     dark_share = float((system.dark_weight > 0).sum() / system.mask.sum()) if schedule.dark_hold > 0 else None
     if dark_share:
@@ -157,7 +167,7 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
             "facet_downsample": solver.factor if solver else None,
             "interreflection_bend_deg": bend["mean"] if bend else None, "moved_from_start_deg": moved,
             "black_share": black_share, "image_noise": image_noise, "highlight_share": highlight_share,
-            "dark_share": dark_share, "continued_held_share": held_share}
+            "dark_share": dark_share, "continued_held_share": held_share, "censored_share": censored_share}
     rendering = Rendering(work.mask, work.images, rendering["reconstruction"], rendering["reflectance"])
     return Estimate(normals, albedo, light_directions=directions if refine_lights else None,
                     light_scales=scales if refine_lights else None, rendering=rendering, info=info)
@@ -288,11 +298,14 @@ def unit(vectors: np.ndarray) -> np.ndarray:
 def build_system(work: Subject, light_directions: np.ndarray, preset: Preset,
                  interreflection: InterreflectionModel,
                  refine_lights: bool, run_fingerprint: str, usable: np.ndarray | None = None,
+                 headroom: np.ndarray | None = None,
                  device: torch.device = torch.device("cpu")) -> tuple[InverseRendering, float]:
     """The initialisation, the networks and the interreflection solve for the working grid,
     around one :class:`InverseRendering`; also the white level the images were divided by.
     ``usable``: (n, h, w) 1 for values the loss may use (:func:`unclipped`), None for all;
-    ``device``: where the initialisation runs.
+    ``headroom``: (n, h, w, 3) what each value may stand for above its reading, in the units of
+    ``work.images`` (:func:`black_headroom`), None for none; ``device``: where the
+    initialisation runs.
 
     Raises:
         InputError: the images are black on the object.
@@ -337,6 +350,7 @@ def build_system(work: Subject, light_directions: np.ndarray, preset: Preset,
         refine_lights=refine_lights, true_normals=true_normals, fingerprint=run_fingerprint,
         usable=None if usable is None else torch.as_tensor(usable)[:, None],
         shadows=preset.cast_shadows, precision=precision,
+        headroom=None if headroom is None else torch.as_tensor(headroom / scale).permute(0, 3, 1, 2),
         albedo=torch.as_tensor(init.albedo.mean(-1), dtype=torch.float32)[None, None])
     return system, scale
 

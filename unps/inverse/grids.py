@@ -60,6 +60,36 @@ def unclipped(clipped: np.ndarray, mask: np.ndarray, factor: int) -> np.ndarray 
     return (~clipped).astype(np.float32)
 
 
+def black_headroom(observed: np.ndarray, mask: np.ndarray, factor: int, ceiling: float,
+                   intensities: np.ndarray | None) -> np.ndarray | None:
+    """(n, h, w, 3) float32 on the working grid (the (H, W) grid of ``mask`` block-averaged by
+    ``factor``): how much brighter than it reads each value may be, in the units of the images
+    divided by their intensities, because it holds pixels read as 0; None when no value is 0.
+
+    A 0 in a quantised stack says only that the light there was below the ``ceiling`` at which
+    the stack's first level begins (:func:`unps.data.checks.zero_ceiling`), not that none
+    arrived: each value's headroom is the share of its block's pixels that read 0, times that
+    ceiling, divided by the image's and the channel's intensity.
+
+    Args:
+        observed: (n, H, W, 3) the images as captured.
+        mask: (H, W) bool.
+        factor: the working grid's block size.
+        ceiling: the light below which a value reads 0, in the units of ``observed``.
+        intensities: (n, 3) the lights' RGB intensities the images are divided by; None: 1.
+    """
+    zeros = (observed == 0) & mask[None, :, :, None]
+    if not zeros.any():
+        return None
+    share = zeros.astype(np.float32)
+    if factor > 1:
+        share = np.stack([block_mean(z, mask, factor)[0] for z in share]).astype(np.float32)
+    per_value = np.full((len(observed), 3), ceiling, np.float32)
+    if intensities is not None:
+        per_value = per_value / np.asarray(intensities, np.float32)
+    return share * per_value[:, None, None, :]
+
+
 def upsample_with_detail(normals: np.ndarray, coarse_init: np.ndarray, fine_init: np.ndarray,
                          mask: np.ndarray, factor: int) -> np.ndarray:
     """Fitted (h, w, 3) normals on a grid ``factor`` times coarser (object ``mask``) → (H, W, 3)

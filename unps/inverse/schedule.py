@@ -33,6 +33,13 @@ class Schedule:
             ``sqrt``, divided by the square root of that brightness (half-way, in log terms), or
             ``albedo``, divided by the initialisation's albedo (floored alike): the residual in
             shading units, which weighs a dark material up but not a pixel the shape keeps dark.
+        censor_black: beyond the paper, a value read as 0 in a quantised stack (an 8-bit
+            capture's grazing lights and dark materials) says only that the light there was
+            below the stack's first level: the loss charges a rendering only for what it puts
+            above that level (on the working grid, above the share of the block's pixels that
+            read 0 times that level, :func:`unps.inverse.grids.black_headroom`), not for any
+            light at all. Read as plain zeros, they pull the normals away from the lights that
+            graze them: steeper than the truth.
         dark_hold: beyond the paper, the weight of a pull ‖N_o − N_init‖² that stays on after
             ``prior_steps`` on the pixels of a dark material, each by its
             :func:`unps.inverse.system.dark_weight`: there the images hardly pin the normals, and
@@ -55,6 +62,7 @@ class Schedule:
     prior_steps: int = 50
     update_every: int = 100
     residual: str = "absolute"
+    censor_black: bool = True
     dark_hold: float = 0.1
     hold_light_frame: bool = True
 
@@ -77,8 +85,9 @@ class Schedule:
         if self.pixel_keep > 1:
             raise InputError(f"preset.pixel_keep is a share of the object's pixels, in (0, 1]; got "
                              f"{self.pixel_keep}")
-        if not isinstance(self.hold_light_frame, bool):
-            raise InputError(f"preset.hold_light_frame must be true or false, got {self.hold_light_frame!r}")
+        for name in ("hold_light_frame", "censor_black"):
+            if not isinstance(getattr(self, name), bool):
+                raise InputError(f"preset.{name} must be true or false, got {getattr(self, name)!r}")
         for name in ("input_noise_var", "prior_weight", "dark_hold"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and value >= 0):

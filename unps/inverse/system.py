@@ -119,6 +119,23 @@ def dark_weight(albedo: torch.Tensor | None, mask: torch.Tensor, share: float = 
     return (1 - albedo / least.clamp_min(1e-12)).clamp(0, 1) * mask
 
 
+def reconstruction_error(reconstruction: torch.Tensor, observed: torch.Tensor,
+                         headroom: torch.Tensor | None = None) -> torch.Tensor:
+    """Each value's absolute error |X̃ − X|, or, with a ``headroom`` h, its distance to the
+    interval [X, X + h] that the value may stand for (a value read as 0 is any light below the
+    first level). (B, 3, H, W) each; h ≥ 0.
+
+    Example:
+        >>> observed, headroom = torch.tensor([0.0, 0.0, 0.5]), torch.tensor([0.1, 0.1, 0.0])
+        >>> reconstruction_error(torch.tensor([0.05, 0.3, 0.4]), observed, headroom)
+        tensor([0.0000, 0.2000, 0.1000])
+    """
+    difference = reconstruction - observed
+    if headroom is None:
+        return difference.abs()
+    return (difference - headroom).clamp_min(0) + (-difference).clamp_min(0)
+
+
 def without_common_rotation(offsets: torch.Tensor, lights: torch.Tensor) -> torch.Tensor:
     """Light offsets less the part that turns all the lights together.
 
@@ -172,6 +189,9 @@ class InverseRendering(L.LightningModule):
         true_normals: (3, H, W) ground truth, for the progress bar's MAE only.
         fingerprint: identifies the run; stored in checkpoints so a resume cannot mix runs.
         usable: (n, 1, H, W) 1 where a value may enter the loss, 0 where it is clipped; None: all.
+        headroom: (n, 3, H, W) how much brighter than read each value may be (values read as 0,
+            ``preset.censor_black``; :func:`unps.inverse.grids.black_headroom`), in the units of
+            ``images``: a rendering between a value and its headroom costs nothing; None: none.
         shadows: render the shadows that the current surface casts (V_i above).
         albedo: (1, 1, H, W) the initialisation's albedo, for ``preset.residual=albedo`` and the
             hold on dark materials.
@@ -186,7 +206,8 @@ class InverseRendering(L.LightningModule):
                  interreflection: Interreflection | None, schedule: Schedule,
                  refine_lights: bool = False, true_normals: torch.Tensor | None = None,
                  fingerprint: str = "", usable: torch.Tensor | None = None, shadows: bool = False,
-                 albedo: torch.Tensor | None = None, precision: str = "32-true"):
+                 albedo: torch.Tensor | None = None, precision: str = "32-true",
+                 headroom: torch.Tensor | None = None):
         super().__init__()
         self.networks_in_bf16 = precision == "bf16-mixed"
         self.normal_net, self.reflectance_net = normal_net, reflectance_net
@@ -204,6 +225,8 @@ class InverseRendering(L.LightningModule):
         self.register_buffer("init_normals", init_normals[None], persistent=False)
         self.register_buffer("usable", None if usable is None
                              else usable.contiguous(memory_format=channels_last), persistent=False)
+        self.register_buffer("headroom", None if headroom is None
+                             else headroom.contiguous(memory_format=channels_last), persistent=False)
         self.register_buffer("true_normals", None if true_normals is None else true_normals[None],
                              persistent=False)
         self.register_buffer("visible", torch.ones(images.shape[0], 1, *mask.shape), persistent=False)
@@ -314,7 +337,9 @@ class InverseRendering(L.LightningModule):
         keep = torch.where(keep.sum() > 0, keep, self.mask)          # none kept: all (nothing waits)
         if self.usable is not None:
             keep = keep * self.usable[index]                     # (B, 1, H, W): clipped values out
-        residual = (out["reconstruction"] - out["observed"]).abs() * (keep * self.pixel_weight)
+        residual = reconstruction_error(out["reconstruction"], out["observed"],
+                                        None if self.headroom is None else self.headroom[index])
+        residual = residual * (keep * self.pixel_weight)
         loss = residual.sum() / (keep.expand(count, 1, -1, -1).sum().clamp_min(1) * 3)
         figures = {"loss/reconstruction": loss}
         if self.global_step < s.prior_steps and s.prior_weight > 0:
