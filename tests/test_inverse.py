@@ -833,10 +833,12 @@ def test_clipped_values_are_found_on_the_working_grid():
 
 
 def test_a_values_headroom_is_its_blocks_share_of_zeros_times_the_ceiling_over_the_intensity():
+    """A pixel read as 0 in most of its images (a dark material) gets none."""
     observed = np.full((2, 4, 4, 3), 0.2, np.float32)
     observed[0, 0, 0] = 0                  # one pixel of the first image's top-left block, every channel
     observed[0, 1, 1, 0] = 0               # another of that block, red only
     observed[1, 3, 3] = 0                  # off the mask: no reading at all
+    observed[:, 2, 0] = 0                  # read as 0 in every image: a dark material, left as read
     mask = np.ones((4, 4), bool)
     mask[3, 3] = False
     intensities = np.array([[1, 2, 4], [1, 1, 1]], np.float32)

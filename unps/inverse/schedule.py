@@ -38,7 +38,8 @@ class Schedule:
             below the stack's first level: the loss charges a rendering only for what it puts
             above that level (on the working grid, above the share of the block's pixels that
             read 0 times that level, :func:`unps.inverse.grids.black_headroom`), not for any
-            light at all. Read as plain zeros, they pull the normals away from the lights that
+            light at all, except on the pixels read as 0 in most of their images (a dark
+            material). Read as plain zeros, they pull the normals away from the lights that
             graze them: steeper than the truth.
         dark_hold: beyond the paper, the weight of a pull ‖N_o − N_init‖² that stays on after
             ``prior_steps`` on the pixels of a dark material, each by its
