@@ -8,7 +8,7 @@ Reads the unps rows that ``normals.py`` fitted (``<run>/<object>-unps/normals.np
 ``light=gt``) and splits each object's pixels by the share of its images in which the pixel
 reads 0 in every channel: a pixel grazed by some lights reads 0 in a few, one of a material
 darker than the first level under most lights reads 0 in most (``preset.censor_black`` leaves
-those as read, :data:`unps.data.checks.MOSTLY_ZERO`). Printed per object and band: the pixel
+those as read, :data:`unps.inverse.grids.MOSTLY_ZERO`). Printed per object and band: the pixel
 count, each run's mean angular error there, and the median RGB-mean albedo of the first run.
 """
 

@@ -31,7 +31,6 @@ FIRST_LEVEL_AT_MOST = 2 / 255     # above an 8-bit file's first level (1/255 rea
 MIN_CLIPPED_VALUES = 8   # a top level held by this many values is a clipping plateau, not one bright pixel
 CLIPPED_WARNING = 0.02  # share of the object's values at the top level that warns
 DARK_WARNING = 0.5      # share of the object's values that are exactly 0 that warns
-MOSTLY_ZERO = 0.5       # a pixel read as 0 in more of its images than this is of a dark material, not grazed
 
 
 def check_image_count(n: int, source: str) -> None:
@@ -183,25 +182,6 @@ def zero_ceiling(images: np.ndarray, mask: np.ndarray) -> float | None:
     above = values[values > first * (1 + 1e-3)]             # past float rounding of the first level
     step = min(float(above.min()) - first, first) if above.size else first
     return first - step / 2
-
-
-def grazed_zeros(observed: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """(n, H, W, 3) bool: the object's values read as 0 that stand for light below the stack's
-    first level (:func:`zero_ceiling`), not for none. The pixels read as 0 (every channel) in more
-    than :data:`MOSTLY_ZERO` of their images are left out: they are of a dark material, whose zeros
-    say its albedo is below the first level rather than that a light grazes it.
-
-    Args:
-        observed: (n, H, W, 3) the images as captured; mask: (H, W) bool.
-
-    Example:
-        >>> observed = np.zeros((4, 1, 2, 3))
-        >>> observed[:3, 0, 1] = 0.5                    # pixel 1 is lit in three of four images
-        >>> grazed_zeros(observed, np.ones((1, 2), bool))[:, 0, :, 0].tolist()
-        [[False, False], [False, False], [False, False], [False, True]]
-    """
-    zeros = (observed == 0) & mask[None, :, :, None]
-    return zeros & (zeros.all(-1).mean(0) <= MOSTLY_ZERO)[None, :, :, None]
 
 
 def value_levels(images: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

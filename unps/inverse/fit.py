@@ -127,11 +127,7 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
         image_noise = None
         held = held_from_solve(system, work.mask, cropped.mask.shape, factor)
         if factor > 1:
-            fine_headroom = (None if headroom is None else
-                             black_headroom(cropped.observed_images(), cropped.mask, 1, ceiling,
-                                            cropped.light_intensities))
-            fine_init = initial_estimate(cropped, light_directions, preset.init, device,
-                                         fine_headroom).normals
+            fine_init = initial_estimate(cropped, light_directions, preset.init, device).normals
             upsampled = upsample_with_detail(normals, coarse_init, fine_init, work.mask, factor)
             if preset.refine_pixels:
                 interreflected = upsample_map(pseudo_normals - normals, work.mask, cropped.mask.shape, factor)
@@ -314,7 +310,7 @@ def build_system(work: Subject, light_directions: np.ndarray, preset: Preset,
     Raises:
         InputError: the images are black on the object.
     """
-    init = initial_estimate(work, light_directions, preset.init, device, headroom)
+    init = initial_estimate(work, light_directions, preset.init, device)
     mask = work.mask
     scale = float(np.percentile(work.images[:, mask], 99))    # the white level: images in [0, ~1]
     if not scale > 0:
@@ -360,13 +356,12 @@ def build_system(work: Subject, light_directions: np.ndarray, preset: Preset,
 
 
 def initial_estimate(subject: Subject, light_directions: np.ndarray, init: str,
-                     device: torch.device, headroom: np.ndarray | None = None) -> Estimate:
-    """N_init and the albedo P (``preset.init``): the robust low-rank initialisation, whose
-    outliers are charged only beyond each value's ``headroom`` ((n, H, W, 3),
-    :func:`black_headroom`; None for none), or Woodham's least squares on every pixel."""
+                     device: torch.device) -> Estimate:
+    """N_init and the albedo P (``preset.init``): the robust low-rank initialisation or
+    Woodham's least squares on every pixel."""
     if init == "least_squares":
         return woodham(subject, light_directions)
-    return robust_init(subject, light_directions, device=device, headroom=headroom)
+    return robust_init(subject, light_directions, device=device)
 
 
 def distance_from_start(normals: np.ndarray, start: np.ndarray, mask: np.ndarray, init: str) -> float:

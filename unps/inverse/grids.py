@@ -11,7 +11,6 @@ import cv2
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
-from unps.data.checks import grazed_zeros
 from unps.data.subject import Subject
 from unps.grid import block_mean
 from unps.solvers.woodham import rgb_albedo
@@ -61,6 +60,9 @@ def unclipped(clipped: np.ndarray, mask: np.ndarray, factor: int) -> np.ndarray 
     return (~clipped).astype(np.float32)
 
 
+MOSTLY_ZERO = 0.5   # a pixel read as 0 in more of its images than this is of a dark material, not grazed
+
+
 def black_headroom(observed: np.ndarray, mask: np.ndarray, factor: int, ceiling: float,
                    intensities: np.ndarray | None) -> np.ndarray | None:
     """(n, h, w, 3) float32 on the working grid (the (H, W) grid of ``mask`` block-averaged by
@@ -70,10 +72,11 @@ def black_headroom(observed: np.ndarray, mask: np.ndarray, factor: int, ceiling:
     A 0 in a quantised stack says only that the light there was below the ``ceiling`` at which
     the stack's first level begins (:func:`unps.data.checks.zero_ceiling`), not that none
     arrived: each value's headroom is the share of its block's pixels that read 0, times that
-    ceiling, divided by the image's and the channel's intensity. The zeros of a dark material
-    are left as read (:func:`unps.data.checks.grazed_zeros`): bounding theirs too took the light
-    benchmark's objects with such a material up to 1.9° further from the truth
-    (``experiments/calibrated/README.md``, "Values read as 0").
+    ceiling, divided by the image's and the channel's intensity. The pixels read as 0 (every
+    channel) in more than :data:`MOSTLY_ZERO` of their images are left as read: they are of a
+    dark material, whose zeros say its albedo is below the first level rather than that a light
+    grazes it; bounding theirs too took the light benchmark's objects with such a material up to
+    1.9° further from the truth (``experiments/calibrated/README.md``, "Values read as 0").
 
     Args:
         observed: (n, H, W, 3) the images as captured.
@@ -82,7 +85,8 @@ def black_headroom(observed: np.ndarray, mask: np.ndarray, factor: int, ceiling:
         ceiling: the light below which a value reads 0, in the units of ``observed``.
         intensities: (n, 3) the lights' RGB intensities the images are divided by; None: 1.
     """
-    zeros = grazed_zeros(observed, mask)
+    zeros = (observed == 0) & mask[None, :, :, None]
+    zeros &= (zeros.all(-1).mean(0) <= MOSTLY_ZERO)[None, :, :, None]
     if not zeros.any():
         return None
     share = zeros.astype(np.float32)

@@ -8,11 +8,6 @@ part) and sparse outliers E (shadows, highlights):
 where ‖Z‖_{r=K} sums the singular values beyond the K-th (Oh et al., partial sum of
 singular values), so the rank-3 subspace keeps its variance instead of being shrunk as
 nuclear-norm RPCA would. Normals and albedo then come from Z with the given lights.
-
-Beyond the paper (``censor_black``): a value of a quantised stack read as 0 stands for any light
-below the first level, so its outlier is charged only for how far Z lies above that light
-(:func:`unps.data.checks.zero_ceiling`). An attached shadow, where Z = n·l < 0, then costs
-nothing, as the Lambertian max(n·l, 0) it stands for says.
 """
 
 from __future__ import annotations
@@ -72,26 +67,10 @@ class RPCAResult:
     residual: float           # ‖X − Z − E‖_F / ‖X‖_F at the end
 
 
-def shrink_outside(v: torch.Tensor, low: torch.Tensor, high: torch.Tensor,
-                   threshold: float) -> torch.Tensor:
-    """The proximal step of E ↦ threshold · dist(E, [low, high]), elementwise (any shape): inside
-    the interval v is kept; outside, it moves ``threshold`` toward the interval, not past it.
-    With low = high = 0 it is the soft threshold of the L1 norm.
-
-    Example:
-        >>> v = torch.tensor([-3.0, -1.5, -0.5, 0.5, 3.0])
-        >>> shrink_outside(v, torch.full_like(v, -1.0), torch.zeros_like(v), 1.0).tolist()
-        [-2.0, -1.0, -0.5, 0.0, 2.0]
-    """
-    inside = torch.maximum(torch.minimum(v, high), low)
-    return inside + torch.nn.functional.softshrink(v - inside, threshold)
-
-
 def partial_sum_rpca(x: np.ndarray, rank: int = 3, lam: float | None = None,
                      tol: float = 1e-4, max_iter: int = 500, rho: float = 1.5,
                      dtype: torch.dtype = torch.float32,
-                     device: torch.device = torch.device("cpu"),
-                     headroom: np.ndarray | None = None) -> RPCAResult:
+                     device: torch.device = torch.device("cpu")) -> RPCAResult:
     """Split X into a matrix whose singular values beyond ``rank`` are small, plus sparse E.
 
     Inexact augmented Lagrangian / ADMM with an increasing penalty μ (Lin et al. 2010):
@@ -110,19 +89,9 @@ def partial_sum_rpca(x: np.ndarray, rank: int = 3, lam: float | None = None,
         rho: growth factor of μ.
         dtype: float32 (fast) or float64.
         device: where the iterations run; the result comes back as numpy.
-        headroom: (m, n) ≥ 0, how much brighter than it reads each value may be (values read
-            as 0 in a quantised stack): a value's outlier E = X − Z costs only for how far Z lies
-            outside [X, X + headroom], or above X + headroom where X = 0 and the headroom is
-            positive (an attached shadow, Z < 0, reads 0 too; :func:`shrink_outside`). None:
-            every value as read.
     """
     transpose = x.shape[0] < x.shape[1]
     x = torch.as_tensor(np.asarray(x).T if transpose else np.asarray(x), dtype=dtype, device=device)
-    if headroom is not None:                       # E = X − Z is free in [e_low, e_high]
-        headroom = torch.as_tensor(np.asarray(headroom).T if transpose else np.asarray(headroom),
-                                   dtype=dtype, device=device)
-        e_low = -headroom
-        e_high = torch.where((x == 0) & (headroom > 0), torch.inf, 0.0).to(dtype)
     lam = 1.0 / np.sqrt(max(x.shape)) if lam is None else float(lam)
     norm_x = torch.linalg.norm(x)
     spectral = torch.linalg.eigvalsh((x.T @ x).double())[-1].sqrt().item()
@@ -138,9 +107,7 @@ def partial_sum_rpca(x: np.ndarray, rank: int = 3, lam: float | None = None,
     for it in range(1, max_iter + 1):
         torch.sub(x, e, out=a).add_(u)                       # X − E + U
         torch.mm(a, partial_svt_weights(a, rank, 1.0 / mu), out=z)
-        a.add_(e).sub_(z)                                    # X − Z + U
-        e = (torch.nn.functional.softshrink(a, lam / mu) if headroom is None
-             else shrink_outside(a, e_low, e_high, lam / mu))
+        e = torch.nn.functional.softshrink(a.add_(e).sub_(z), lam / mu)   # X − Z + U
         r = torch.sub(x, z, out=a).sub_(e)
         residual = (torch.linalg.norm(r) / norm_x).item()
         mu_next = min(mu * rho, mu_max)
@@ -158,7 +125,7 @@ def partial_sum_rpca(x: np.ndarray, rank: int = 3, lam: float | None = None,
 @stage("robust initialisation")
 def robust_init(subject: Subject, light_directions: np.ndarray, rank: int = 3,
                 lam: float | None = None, tol: float = 1e-4, max_iter: int = 500,
-                device: str | torch.device = "auto", headroom: np.ndarray | None = None) -> Estimate:
+                device: str | torch.device = "auto") -> Estimate:
     """Normals and albedo from the low-rank part of the gray image matrix.
 
     Args:
@@ -166,18 +133,13 @@ def robust_init(subject: Subject, light_directions: np.ndarray, rank: int = 3,
         light_directions: (n, 3) unit, surface to light, unps frame (given or estimated).
         rank, lam, tol, max_iter: see :func:`partial_sum_rpca`.
         device: where the RPCA iterates (``device=`` option, :func:`unps.device.resolve_device`).
-        headroom: beyond the paper, (n, H, W, 3) how much brighter than it reads each value may
-            be, in the units of ``subject.images`` (values read as 0,
-            :func:`unps.inverse.grids.black_headroom`); a gray value's is its channels' mean.
-            None: every value as read, as the paper does.
     """
     pixels = subject.images[:, subject.mask]                          # (n, m, 3)
     if not np.any(pixels > 0):
         raise InputError(f"subject {subject.name!r}: every image is black on the object, so there "
                          f"is nothing to solve")
-    gray_headroom = None if headroom is None else headroom[:, subject.mask].mean(-1).T
     result = partial_sum_rpca(pixels.mean(-1).T, rank, lam, tol, max_iter,
-                              device=resolve_device(device), headroom=gray_headroom)
+                              device=resolve_device(device))
     log.info("robust init: %d ADMM iterations, residual %.1e, %.1f%% of entries are outliers",
              result.iterations, result.residual, 100 * np.mean(result.sparse != 0))
     b = lambertian_least_squares(result.low_rank.T, light_directions)
