@@ -122,6 +122,24 @@ def partial_sum_rpca(x: np.ndarray, rank: int = 3, lam: float | None = None,
     return RPCAResult(z.T if transpose else z, e.T if transpose else e, it, residual)
 
 
+OUTLIER_SHARE_OF_WHITE = 0.01   # an entry of E counts as an outlier in the log above this share of white
+
+
+def outlier_share(sparse: np.ndarray, x: np.ndarray) -> float:
+    """The share of the entries of E (``sparse``, the shape of ``x``) above
+    :data:`OUTLIER_SHARE_OF_WHITE` of X's white level (its 99th percentile). The inexact ADMM
+    stops with nearly every entry of E non-zero, mostly by far less than a quantisation level,
+    so counting the non-zero ones says nothing.
+
+    Example:
+        >>> x = np.ones((10, 10)); sparse = np.full((10, 10), 1e-4); sparse[0, :5] = 0.5
+        >>> outlier_share(sparse, x)
+        0.05
+    """
+    white = np.percentile(x, 99)
+    return float(np.mean(np.abs(sparse) > OUTLIER_SHARE_OF_WHITE * white)) if white > 0 else 0.0
+
+
 @stage("robust initialisation")
 def robust_init(subject: Subject, light_directions: np.ndarray, rank: int = 3,
                 lam: float | None = None, tol: float = 1e-4, max_iter: int = 500,
@@ -138,10 +156,12 @@ def robust_init(subject: Subject, light_directions: np.ndarray, rank: int = 3,
     if not np.any(pixels > 0):
         raise InputError(f"subject {subject.name!r}: every image is black on the object, so there "
                          f"is nothing to solve")
-    result = partial_sum_rpca(pixels.mean(-1).T, rank, lam, tol, max_iter,
-                              device=resolve_device(device))
-    log.info("robust init: %d ADMM iterations, residual %.1e, %.1f%% of entries are outliers",
-             result.iterations, result.residual, 100 * np.mean(result.sparse != 0))
+    gray = pixels.mean(-1).T                                          # (m, n)
+    result = partial_sum_rpca(gray, rank, lam, tol, max_iter, device=resolve_device(device))
+    log.info("robust init: %d ADMM iterations, residual %.1e; %.1f%% of the values lie off the "
+             "low-rank part by more than %.0f%% of the white level (shadows, highlights)",
+             result.iterations, result.residual,
+             100 * outlier_share(result.sparse, gray), 100 * OUTLIER_SHARE_OF_WHITE)
     b = lambertian_least_squares(result.low_rank.T, light_directions)
     normals, _ = normals_from_scaled(b)
     albedo = rgb_albedo(pixels, normals, light_directions)
