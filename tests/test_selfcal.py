@@ -206,7 +206,7 @@ def test_black_values_hold_the_rendering_only_below_the_first_level():
     white, captured = 0.5, sphere.replace(light_intensities=None)      # levels as the camera stored them
     guess = Lights(sphere.light_directions, sphere.light_intensities, "guess")
     ceiling = black_ceiling(captured, guess, white)
-    expected = (1 / 255) / (guess.intensities * white)
+    expected = (0.5 / 255) / (guess.intensities * white)         # rounded: level 1 begins at ½/255
     np.testing.assert_allclose(ceiling.numpy(), expected, rtol=1e-5)
     fitted, verdict = self_calibrate(sphere, rotated(sphere, 5), settings)
     assert verdict.outcome == "changed" and np.isfinite(fitted.directions).all()

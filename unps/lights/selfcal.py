@@ -34,7 +34,7 @@ from typing import ClassVar
 import numpy as np
 import torch
 
-from unps.data.checks import black_everywhere, first_level
+from unps.data.checks import black_everywhere, zero_ceiling
 from unps.data.lights import Verdict
 from unps.data.subject import Subject
 from unps.device import resolve_device
@@ -72,10 +72,11 @@ class SelfCalibration:
             Off: on the light benchmark it helped 8-bit objects with dark materials by up to
             0.7° and cost a nearly flat one 2.3° (``experiments/light_benchmark/README.md``).
         censor_black: a value of 0 in the images says only that the light there was below the
-            stack's first quantisation level (:func:`unps.data.checks.first_level`): the loss
-            charges a rendering only for what it puts above that level, not for any light at
-            all. Matters on 8-bit captures, whose dark materials and grazing lights read 0: on
-            the light benchmark it gained up to 0.4° there and cost no case more than 0.08°
+            stack's first quantisation level (:func:`unps.data.checks.zero_ceiling`: where the
+            encoder's rounding or truncation switches to it): the loss charges a rendering only
+            for what it puts above that light, not for any light at all. Matters on 8-bit
+            captures, whose dark materials and grazing lights read 0: on the light benchmark it
+            gained up to 0.4° there and cost no case more than 0.08°
             (``experiments/light_benchmark/README.md``).
         hold_frame: keep the 3×3 frame A that all the lights share at the identity, so that each
             light moves only by its own residual ε_i. A fit that renders what it cannot match
@@ -278,13 +279,15 @@ def lit_share(subject: Subject, max_pixels: int) -> torch.Tensor | None:
 
 def black_ceiling(subject: Subject, lights: Lights, white: float) -> torch.Tensor | None:
     """(n, 3) what a value of 0 in image i and channel c of the self-calibration's target stands
-    for at most: the captured stack's first quantisation level, divided as the target is by the
-    first guess's intensity and the target's ``white`` level; None without a first level."""
-    first = first_level(subject.observed_images(), subject.mask)
-    if first is None:
+    for at most: the light at which the captured stack's first quantisation level begins
+    (:func:`unps.data.checks.zero_ceiling`, as the fit's ``preset.censor_black``), divided as the
+    target is by the first guess's intensity and the target's ``white`` level; None without a
+    first level."""
+    ceiling = zero_ceiling(subject.observed_images(), subject.mask)
+    if ceiling is None:
         return None
     intensities = lights.intensities if lights.intensities is not None else np.ones((subject.n_images, 3))
-    return torch.as_tensor(first / (intensities * white), dtype=torch.float32)
+    return torch.as_tensor(ceiling / (intensities * white), dtype=torch.float32)
 
 
 def initial_model(grid: Subject, target: torch.Tensor, scaled_lights: np.ndarray,
