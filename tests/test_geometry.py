@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 import torch
-from scipy.ndimage import binary_erosion
+from scipy.ndimage import binary_dilation, binary_erosion
 
 from unps.data.analytic import height_field
 from unps.grid import Frame
@@ -29,6 +29,23 @@ def test_each_part_of_the_mask_gets_zero_mean():
     z = integrate_normals(normals, mask)
     np.testing.assert_allclose(z[0, :3], [-0.75, 0, 0.75], atol=1e-9)
     np.testing.assert_allclose(z[0, 5:], [-1.125, -0.375, 0.375, 1.125], atol=1e-9)
+
+
+def test_a_hole_without_normals_is_spanned_from_its_rim():
+    """Pixels without a normal (0, as for pixels black in every image) next to one another left
+    the equations singular, and the whole depth NaN; now the hole is spanned from its rim."""
+    depth, normals, mask = height_field("sphere", 64, seed=4)
+    hole = np.zeros_like(mask)
+    hole[28:36, 28:36] = True
+    holed = normals.copy()
+    holed[hole] = 0.0
+    z = integrate_normals(holed, mask)
+    assert np.isfinite(z[mask]).all()
+    truth = depth - depth[mask].mean()
+    seen = mask & ~hole
+    assert np.abs((z - truth)[seen]).max() < 0.02 * np.ptp(truth[mask])
+    rim = binary_dilation(hole) & ~hole
+    assert z[rim].min() - 0.5 <= z[hole].min() and z[hole].max() <= truth[hole].max() + 0.5
 
 
 def test_mesh_faces_point_to_the_camera_and_follow_the_frame(tmp_path):

@@ -20,6 +20,10 @@ import torch.nn.functional as F
 from unps.grid import Frame
 
 
+NO_SLOPE = 1e-6   # |n̄_z| below which a pair of pixels' equation says nothing of their step
+SPAN = 1e-3       # weight of Δz = 0 for such a pair: spans a hole in the normals, and only there
+
+
 def integrate_normals(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """Depth whose gradient best agrees with the normals, min_D ‖∇D − Ĝ‖² over the mask.
 
@@ -27,7 +31,11 @@ def integrate_normals(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
     orientation constraint rather than the gradient itself so that steep pixels (n_z → 0) do
     not blow up: the step t between them must be orthogonal to their mean normal n̄,
     n̄ · t = 0. Along +col, t = (1, 0, Δz): n̄_z Δz = −n̄_x. Along +row (one pixel down, y − 1),
-    t = (0, −1, Δz): n̄_z Δz = n̄_y. The sparse normal equations are solved exactly; each
+    t = (0, −1, Δz): n̄_z Δz = n̄_y. A pair whose mean normal says nothing of its step
+    (|n̄_z| < :data:`NO_SLOPE`: two pixels without a normal, such as pixels black in every
+    image, whose estimated normal is 0) gets the faint :data:`SPAN` · Δz = 0 instead, so that a
+    hole in the normals is spanned from its rim rather than left undetermined (a singular
+    system, whose solve is NaN everywhere). The sparse normal equations are solved exactly; each
     connected part of the mask gets zero mean depth (depth is known up to an offset).
 
     Args:
@@ -41,6 +49,8 @@ def integrate_normals(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
     index = -np.ones((h, w), dtype=np.int64)
     index[mask] = np.arange(mask.sum())
     first, second, nz, target = orientation_equations(normals, index, mask)
+    silent = np.abs(nz) < NO_SLOPE
+    nz, target = np.where(silent, SPAN, nz), np.where(silent, 0.0, target)
     m, e = int(mask.sum()), first.size
     eq = np.arange(e)
     a = sp.csr_matrix((np.concatenate([nz, -nz]), (np.concatenate([eq, eq]),
