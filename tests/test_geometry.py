@@ -48,6 +48,16 @@ def test_a_hole_without_normals_is_spanned_from_its_rim():
     assert z[rim].min() - 0.5 <= z[hole].min() and z[hole].max() <= truth[hole].max() + 0.5
 
 
+def test_a_normal_that_is_not_finite_counts_as_none():
+    depth, normals, mask = height_field("sphere", 32, seed=4)
+    spoilt = normals.copy()
+    spoilt[16, 16] = np.nan
+    z = integrate_normals(spoilt, mask)
+    assert np.isfinite(z[mask]).all()
+    truth = depth - depth[mask].mean()
+    assert np.abs((z - truth)[mask]).max() < 0.02 * np.ptp(truth[mask])
+
+
 def test_mesh_faces_point_to_the_camera_and_follow_the_frame(tmp_path):
     depth = np.zeros((3, 3), np.float32)
     mask = np.ones((3, 3), bool)

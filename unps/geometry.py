@@ -33,10 +33,11 @@ def integrate_normals(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
     n̄ · t = 0. Along +col, t = (1, 0, Δz): n̄_z Δz = −n̄_x. Along +row (one pixel down, y − 1),
     t = (0, −1, Δz): n̄_z Δz = n̄_y. A pair whose mean normal says nothing of its step
     (|n̄_z| < :data:`NO_SLOPE`: two pixels without a normal, such as pixels black in every
-    image, whose estimated normal is 0) gets the faint :data:`SPAN` · Δz = 0 instead, so that a
-    hole in the normals is spanned from its rim rather than left undetermined (a singular
-    system, whose solve is NaN everywhere). The sparse normal equations are solved exactly; each
-    connected part of the mask gets zero mean depth (depth is known up to an offset).
+    image, whose estimated normal is 0; a normal that is not finite counts as none) gets the
+    faint :data:`SPAN` · Δz = 0 instead, so that a hole in the normals is spanned from its rim
+    rather than left undetermined (a singular system, whose solve is NaN everywhere). The
+    sparse normal equations are solved exactly; each connected part of the mask gets zero mean
+    depth (depth is known up to an offset).
 
     Args:
         normals: (H, W, 3) unit normals.
@@ -48,7 +49,8 @@ def integrate_normals(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
     h, w = mask.shape
     index = -np.ones((h, w), dtype=np.int64)
     index[mask] = np.arange(mask.sum())
-    first, second, nz, target = orientation_equations(normals, index, mask)
+    known = np.nan_to_num(normals, nan=0.0, posinf=0.0, neginf=0.0)
+    first, second, nz, target = orientation_equations(known, index, mask)
     silent = np.abs(nz) < NO_SLOPE
     nz, target = np.where(silent, SPAN, nz), np.where(silent, 0.0, target)
     m, e = int(mask.sum()), first.size
