@@ -126,6 +126,36 @@ def study_cases(args):
     return cases(args.only, args.sets, args.data, args.cache, args.names)
 
 
+def selfcal_study(description: str, folder: str, made_with: dict, run_case, summarise, progress,
+                  report, defaults: dict | None = None) -> None:
+    """Run a study of the self-calibration from the command line: :func:`study_parser`'s
+    arguments with ``--set`` (its settings over ``defaults``) and ``--tag``; folder
+    ``--out`` (default ``<cache>/<folder>/<tag>``) claimed for ``made_with``, the settings and the
+    shipped weights' digest; each case run as ``run_case(subject, selfcal)`` and kept there
+    (:func:`runs.summaries`, with ``summarise`` and ``progress``; with ``--report`` only those
+    kept), and ``report(rows)`` printed."""
+    import ast
+
+    from unps.lights.selfcal import SelfCalibration
+
+    parser = study_parser(description, f"default: <cache>/{folder}/<tag>")
+    parser.add_argument("--set", dest="settings", nargs="*", default=[],
+                        help="self-calibration settings, e.g. prior_weight=0.001")
+    parser.add_argument("--tag", default="default", help="names the results folder")
+    args = parser.parse_args()
+    cases = study_cases(args)
+    out = args.out or args.cache / folder / args.tag
+    try:
+        settings = (defaults or {}) | {key: ast.literal_eval(value)
+                                       for key, value in (s.split("=", 1) for s in args.settings)}
+        selfcal = SelfCalibration(device="cpu", **settings)
+        runs.claim(out, {**made_with, "settings": args.settings, "weights": runs.weights_digest(None)})
+    except (ValueError, TypeError, SyntaxError) as e:
+        parser.error(str(e))
+    print(report(runs.summaries(cases, out, lambda subject: run_case(subject, selfcal), summarise,
+                                progress, args.report)))
+
+
 def network_study(parser, args, out: Path, made_with: dict, run_case, report, progress) -> None:
     """Run a study of the network's own lights (no stage after it): folder ``out`` claimed for
     ``made_with`` and the shipped weights' digest, each case :func:`study_cases` gives run as

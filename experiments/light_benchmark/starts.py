@@ -20,7 +20,6 @@ None of it feeds training.
 
 from __future__ import annotations
 
-import ast
 import dataclasses
 import sys
 import time
@@ -37,7 +36,6 @@ from unps.metrics import angular_error
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import benchmark  # noqa: E402
-import runs  # noqa: E402
 import scenes  # noqa: E402
 
 TURN_DEG = 6.0
@@ -129,26 +127,10 @@ def report(rows: dict) -> str:
 
 
 def main():
-    parser = benchmark.study_parser(__doc__.split("\n")[0], "default: <cache>/starts/<tag>")
-    parser.add_argument("--set", dest="settings", nargs="*", default=[],
-                        help="self-calibration settings over the free fit's, e.g. prior_weight=0.001")
-    parser.add_argument("--tag", default="default", help="names the results folder")
-    args = parser.parse_args()
-    cases = benchmark.study_cases(args)
-    out = args.out or args.cache / "starts" / args.tag
-    try:
-        settings = FREE | {key: ast.literal_eval(value)
-                           for key, value in (s.split("=", 1) for s in args.settings)}
-        selfcal = SelfCalibration(device="cpu", **settings)
-        runs.claim(out, {"scenes": scenes.SCENE_VERSION, "starts": [TURN_DEG, STRETCH],
-                         "stages": ["reversal", "selfcal"], "settings": args.settings,
-                         "weights": runs.weights_digest(None)})
-    except (ValueError, TypeError, SyntaxError) as e:
-        parser.error(str(e))
-
-    def run(subject):
-        return run_case(subject, selfcal)
-    print(report(runs.summaries(cases, out, run, summarise, progress, args.report)))
+    benchmark.selfcal_study(__doc__.split("\n")[0], "starts",
+                            {"scenes": scenes.SCENE_VERSION, "starts": [TURN_DEG, STRETCH],
+                             "stages": ["reversal", "selfcal"]},
+                            run_case, summarise, progress, report, FREE)
 
 
 if __name__ == "__main__":

@@ -22,7 +22,6 @@ None of it feeds training.
 
 from __future__ import annotations
 
-import ast
 import sys
 import time
 from pathlib import Path
@@ -137,26 +136,10 @@ def report(rows: dict) -> str:
 
 
 def main():
-    parser = benchmark.study_parser(__doc__.split("\n")[0], "default: <cache>/subsets/<tag>")
-    parser.add_argument("--set", dest="settings", nargs="*", default=[],
-                        help="self-calibration settings, e.g. prior_weight=0.001")
-    parser.add_argument("--tag", default="default", help="names the results folder")
-    args = parser.parse_args()
-    cases = benchmark.study_cases(args)
-    out = args.out or args.cache / "subsets" / args.tag
-    try:
-        settings = {key: ast.literal_eval(value) for key, value in (s.split("=", 1) for s in args.settings)}
-        selfcal = SelfCalibration(device="cpu", **settings)
-        runs.claim(out, {"scenes": scenes.SCENE_VERSION, "halves": "even/odd",
-                         "stages": ["reversal", "selfcal"], "settings": args.settings,
-                         "weights": runs.weights_digest(None)})
-    except (ValueError, TypeError, SyntaxError) as e:
-        parser.error(str(e))
-
-    def run(subject):
-        return run_case(subject, selfcal)
-
-    print(report(runs.summaries(cases, out, run, summarise, progress, args.report)))
+    benchmark.selfcal_study(__doc__.split("\n")[0], "subsets",
+                            {"scenes": scenes.SCENE_VERSION, "halves": "even/odd",
+                             "stages": ["reversal", "selfcal"]},
+                            run_case, summarise, progress, report)
 
 
 if __name__ == "__main__":
