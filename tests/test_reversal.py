@@ -12,6 +12,8 @@ from unps.errors import InputError
 from unps.lights import Lights, with_lights
 from unps.lights.reversal import (HALF_TURN, AttachedLight, ReversalTest, ShadowEvidence, attached_light,
                                   shadow_evidence)
+from unps.lights.selfcal import SelfCalibration
+from unps.lights.stages import run_stages
 from unps.solvers.nayar import interreflection_kernel
 from unps.solvers.rpca import robust_init
 
@@ -172,3 +174,19 @@ def test_force_turns_the_lights_without_reading_the_images():
 def test_force_that_is_not_true_or_false_is_refused_by_name():
     with pytest.raises(InputError, match=r"light.reversal.force must be true or false, got 'ture'"):
         ReversalTest(force="ture")
+
+
+def test_the_self_calibration_leaves_a_reading_the_reversal_test_warned_of(caplog):
+    """A surface read inside out is no surface to fit the lights to: after the reversal test's
+    warning the self-calibration keeps the lights without fitting; with
+    ``decline_inside_out=false`` it fits them."""
+    bowl = interreflected(concave=True)
+    quick = dict(steps=100, max_pixels=600)
+    warned = run_stages(bowl, turned(bowl), [ReversalTest(), SelfCalibration(**quick)])
+    assert [v.outcome for v in warned.verdicts] == ["kept", "declined"]
+    assert np.array_equal(warned.directions, turned(bowl).directions)
+    assert "decline_inside_out" in warned.verdicts[-1].reason and "inside out" in caplog.text
+    fitted = run_stages(bowl, turned(bowl), [ReversalTest(), SelfCalibration(**quick, decline_inside_out=False)])
+    assert fitted.verdicts[-1].outcome == "changed"
+    right = Lights(bowl.light_directions, None, "estimated")
+    assert run_stages(bowl, right, [ReversalTest(), SelfCalibration(**quick)]).verdicts[-1].outcome == "changed"

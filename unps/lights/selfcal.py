@@ -18,7 +18,9 @@ enough for a CPU:
 3. the lights are held near the first guess, each as far as the light network was sure of it
    (:mod:`unps.lights.prior`): they move where the images pin them, and only there. A fit that
    diverges returns the first guess, and so does one that leaves the lights nearer the view axis
-   than the first guess (:func:`flattening`); one that moved the lights far from it warns.
+   than the first guess (:func:`flattening`); one that moved the lights far from it warns. Where
+   the reversal test warned that the first guess may read the surface inside out, no fit is made
+   (:func:`warned_inside_out`).
 
 Frame: x right (+col), y up (−row), z toward the camera; orthographic view along +z.
 """
@@ -107,6 +109,10 @@ class SelfCalibration:
             than 1° had flattened the lights by 1.36–3.35°; the rule also declines four fits
             that gained 0.7–2.1° (flattened 1.27–1.56°, a turn about the view axis counting
             toward it) (``experiments/light_benchmark/README.md``, "Lights the fit flattens").
+        decline_inside_out: keep the first guess, without fitting, when the reversal test kept
+            the lights but warned that they may read the surface inside out
+            (:attr:`unps.lights.reversal.AttachedLight.points_to_reversal`): a fit of a surface
+            read inside out moves the lights to render it (unps's Rose 60.0° → 67.9° off).
         log_every: steps between progress lines.
         device: where the fit runs (the run's ``device=``, :func:`unps.device.resolve_device`).
     """
@@ -129,6 +135,7 @@ class SelfCalibration:
     prior_floor_deg: float = 3.0
     prior_intensity: float = 0.1
     max_flattening_deg: float | None = 1.0
+    decline_inside_out: bool = True
     log_every: int = 500
     device: str = "auto"
 
@@ -170,6 +177,12 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
         raise InputError(f"self-calibration needs at least {MIN_IMAGES} images, "
                          f"{subject.name!r} has {subject.n_images}: use light=estimated (the "
                          f"network's lights) or light=gt")
+    if settings.decline_inside_out and warned_inside_out(lights):
+        log.warning("self-calibration of %s skipped: the reversal test warned that the lights may "
+                    "read the surface inside out, and a fit of that surface would move the lights "
+                    "to render it; keeping them", subject.name)
+        return lights, Verdict(settings.name, "declined", "the reversal test warned that the lights "
+                               "may read the surface inside out (light.selfcal.decline_inside_out)")
     start = time.perf_counter()
     subject = subject.crop_to_mask(1)              # the working grid's crop: the same pixels, less to divide
     observed = with_lights(subject, lights)              # divided by the first guess's intensities
@@ -228,6 +241,13 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
     return fitted, Verdict(settings.name, "changed", f"fitted to the images{how} (loss {loss:.4g}, "
                            f"pull toward the first guess {pull:.4g}); directions moved {moved:.2f}° "
                            f"on average", evidence)
+
+
+def warned_inside_out(lights: Lights) -> bool:
+    """Whether the reversal test kept ``lights`` but warned that they may read the surface
+    inside out (its verdict's ``attached_points_to_reversal``)."""
+    return any(v.stage == "reversal" and v.outcome == "kept"
+               and bool(v.evidence.get("attached_points_to_reversal")) for v in lights.verdicts)
 
 
 def flattening(directions: np.ndarray, first_guess: np.ndarray) -> float:
