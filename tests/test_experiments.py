@@ -979,3 +979,32 @@ def test_light_benchmark_records_which_weights_its_results_were_made_with(tmp_pa
     assert normals.made_with("gt", [f"light.checkpoint={weights}"]) == [f"light.checkpoint={weights}"]
     with pytest.raises(InputError, match="gone.pt: light-network weights not found"):
         normals.made_with("selfcal", [f"light.checkpoint={tmp_path / 'gone.pt'}"])
+
+
+def test_decoding_study_reads_the_shipped_soft_arg_max_as_the_network_does_and_each_other_way():
+    """The study's ``soft`` reading of the eight passes is ``light=estimated``'s own estimate; a
+    peak of two equal bins is read at their middle by every reading but arg-max, and a
+    temperature above 1 draws a lopsided softmax toward its lesser bin."""
+    import torch
+
+    from unps.lightnet.estimate import network_lights
+    from unps.lightnet.system import load_lightnet
+    from unps.metrics import light_direction_mae
+
+    decoding = load_script("lb_decoding", "experiments/light_benchmark/decoding.py")
+    net, config = load_lightnet(None)
+    subject = render_lambertian(shape="sphere", size=32, n_lights=10, seed=1)
+    result = decoding.run_case(subject, net, config["recipe"]["resolution"])
+    shipped = light_direction_mae(network_lights(subject, device="cpu")[0].directions, subject.light_directions)
+    assert result["soft"]["error"] == pytest.approx(shipped, abs=1e-3)
+    assert set(result) == {"intensity", *decoding.DECODINGS}
+    pair = torch.full((1, 36), -1e9)
+    pair[0, [20, 21]] = 0.0                                    # 12.5° and 17.5°, equally likely
+    for how in ("soft", "T1.5", "vector"):
+        x, _, z = decoding.read_directions({"azimuth": pair, "elevation": pair}, how)[0].tolist()
+        assert np.degrees(np.arctan2(x, z)) == pytest.approx(15, abs=1e-3), how     # the azimuth
+    lopsided = torch.full((1, 36), -1e9)
+    lopsided[0, 20], lopsided[0, 21] = 1.0, 0.0
+    angle = {how: float(decoding.read_directions({"azimuth": lopsided, "elevation": lopsided}, how)[0, 1])
+             for how in ("soft", "T2", "T0.8", "argmax")}
+    assert angle["argmax"] < angle["T0.8"] < angle["soft"] < angle["T2"]
