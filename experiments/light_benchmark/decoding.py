@@ -20,13 +20,16 @@ reading. None of it feeds training. Results are kept case by case in ``--out`` (
 
 from __future__ import annotations
 
+import functools
 import sys
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from unps.lightnet.bins import ANGLE_RANGE, INTENSITY_RANGE, angles_to_direction, bin_centres, decode
+from unps.lightnet.bins import (ANGLE_BINS, ANGLE_RANGE, INTENSITY_RANGE, angles_to_direction, bin_centres,
+                               decode, direction_to_angles, to_bin)
+from unps.lightnet.rig import draw_lights
 from unps.lightnet.estimate import FRAMINGS, network_input, paired
 from unps.lightnet.symmetry import SYMMETRIES, frame_matrix, mean_direction, transform_images
 from unps.lightnet.system import load_lightnet
@@ -36,10 +39,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import benchmark  # noqa: E402
 import runs  # noqa: E402
 
-DECODINGS = ("soft", "T0.8", "T1.25", "T1.5", "T2", "vector", "vectorT1.5", "argmax")
+DECODINGS = ("soft", "T0.8", "T1.25", "T1.5", "T2", "vector", "vectorT1.5", "argmax", "prior", "prior0.5")
 """``soft``: the shipped soft-arg-max of each angle; ``T<t>``: softmax(logits / t) first;
 ``vector``: the mean unit vector (:func:`expected_direction`), ``vectorT<t>``
-at temperature t; ``argmax``: the top bins' centres."""
+at temperature t; ``argmax``: the top bins' centres; ``prior``: the softmax divided by the
+training mix's share of lights in each bin first (:func:`training_prior`), ``prior<w>`` by that
+share to the power w."""
+
+PRIOR_FLOOR = 0.01   # bins the training mix hardly reaches are divided by this share of the fullest
 
 
 def expected_direction(azimuth_logits: torch.Tensor, elevation_logits: torch.Tensor) -> torch.Tensor:
@@ -61,9 +68,35 @@ def expected_direction(azimuth_logits: torch.Tensor, elevation_logits: torch.Ten
     return torch.nn.functional.normalize(torch.stack([cos_el * sin_az, sin_el, cos_el * cos_az], -1), dim=-1)
 
 
+@functools.cache
+def training_prior(draws: int = 4000, seed: int = 0) -> torch.Tensor:
+    """(36,) log share of the training mix's light directions in each angle bin: its rig layouts
+    (``unps/conf/train.yaml``) drawn ``draws`` times, azimuth and elevation pooled (every layout
+    is drawn at a random turn about the view axis, so the two share one distribution); each share
+    at least :data:`PRIOR_FLOOR` of the fullest bin's. Dividing the softmax by it reads the
+    network's answer as if every bin were as likely a priori (a correction for label shift,
+    Saerens et al., Neural Computation 2002)."""
+    from hydra import compose, initialize_config_module
+
+    with initialize_config_module("unps.conf", version_base=None):
+        data = compose("train").data
+    generator = torch.Generator().manual_seed(seed)
+    layouts = dict(data.layouts)
+    lights = torch.cat([draw_lights(layouts, data.lights_per_shape, data.max_zenith_deg, generator)
+                        for _ in range(draws)])
+    angles = torch.cat(direction_to_angles(lights))
+    share = torch.bincount(to_bin(angles, ANGLE_BINS, *ANGLE_RANGE), minlength=ANGLE_BINS).double()
+    share = share.clamp_min(PRIOR_FLOOR * share.max())
+    return torch.log(share / share.sum()).float()
+
+
 def read_directions(logits: dict, how: str) -> torch.Tensor:
     """(n, 3) unit directions from one pass's (n, 36) angle logits, read as ``how`` (:data:`DECODINGS`)."""
     az, el = logits["azimuth"], logits["elevation"]
+    if how.startswith("prior"):
+        weight = float(how.removeprefix("prior") or 1)
+        az, el = az - weight * training_prior(), el - weight * training_prior()
+        how = "soft"
     name, _, temperature = how.partition("T")
     if temperature:
         az, el = az / float(temperature), el / float(temperature)
