@@ -1,3 +1,4 @@
+import dataclasses
 import doctest
 import json
 import os
@@ -1008,3 +1009,27 @@ def test_decoding_study_reads_the_shipped_soft_arg_max_as_the_network_does_and_e
     angle = {how: float(decoding.read_directions({"azimuth": lopsided, "elevation": lopsided}, how)[0, 1])
              for how in ("soft", "T2", "T0.8", "argmax")}
     assert angle["argmax"] < angle["T0.8"] < angle["soft"] < angle["T2"]
+
+
+def test_light_benchmark_diligent_rig_group_lights_the_same_objects_with_diligents_own_dome():
+    """``--only diligent-rig``: the 24 objects as they are, under DiLiGenT's 96 lights (directions
+    and intensities from ball's files) and the 20 and 12 spread over them as DiLiGenT's objects'
+    sets are; cached apart, while the drawn rigs' objects keep the keys they had."""
+    folder = diligent_object("pmsData/ballPNG")
+    benchmark = load_script("lb_benchmark", "experiments/light_benchmark/benchmark.py")
+    scenes = benchmark.scenes
+    for on_rig, drawn in zip(scenes.ON_DILIGENT_RIG, scenes.OBJECTS):
+        assert dataclasses.replace(on_rig, rig="drawn") == drawn and on_rig.key() != drawn.key()
+    spec = {k: v for k, v in dataclasses.asdict(scenes.OBJECTS[0]).items() if k != "rig"}
+    assert scenes.OBJECTS[0].key() == scenes.hashlib.sha256(json.dumps(
+        {**spec, "version": scenes.SCENE_VERSION, "resolution": scenes.RESOLUTION, "spp": scenes.SPP,
+         "bounces": scenes.BOUNCES, "camera": scenes.CAMERA_VERSION}, sort_keys=True).encode()).hexdigest()[:10]
+    rig = scenes.diligent_rig(folder.parents[2])
+    directions = np.loadtxt(folder / "light_directions.txt")
+    np.testing.assert_array_equal(rig.directions["96"], directions)
+    np.testing.assert_array_equal(rig.intensities["96"], np.loadtxt(folder / "light_intensities.txt"))
+    for label in ("20", "12"):
+        chosen = scenes.evenly_spread(directions, int(label))
+        np.testing.assert_array_equal(rig.directions[label], directions[chosen])
+    found = list(benchmark.cases(["diligent-rig"], ["96"], folder.parents[2], folder, names=["pits"]))
+    assert [(group, name, label) for group, name, label, _ in found] == [("diligent-rig", "pits", "96")]

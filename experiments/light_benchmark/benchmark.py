@@ -15,6 +15,10 @@ The cases (none of them feeds training):
 - **single**: the same 24 objects, each in one material alone (``scenes.SINGLE_MATERIAL``: the
   first of its materials, the same pose, lights and camera), as most of DiLiGenT's objects and
   many users' captures are; asked for by name (``--only single``).
+- **diligent-rig**: the same 24 objects lit by DiLiGenT's own dome (ball's light directions and
+  intensities from ``../shared/data``; ``scenes.ON_DILIGENT_RIG``), its 96 lights and the 20 and 12
+  evenly spread over them, where the others have rigs drawn as the network's training draws them;
+  asked for by name (``--only diligent-rig``).
 - **diligent**: ball, cat and pot1 of ``../shared/data`` at 96 images, and at 20 and 12 images
   evenly spread over their lights (farthest-point order from the light nearest the view).
 - **synthetic**: unps's eight rendered subjects (100 images).
@@ -50,29 +54,15 @@ import scenes  # noqa: E402
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
 DEFAULT_CACHE = Path("~/.cache/unps/light_benchmark").expanduser()
 DILIGENT = ("ball", "cat", "pot1")
-GROUPS = ("benchmark", "single", "diligent", "synthetic")
+GROUPS = ("benchmark", "single", "diligent-rig", "diligent", "synthetic")
 DEFAULT_GROUPS = ("benchmark", "diligent", "synthetic")
 RAISED, RAISED_TWICE = 1.0, 2.0     # degrees: a stage that raised the error by more is flagged
 
 
-def evenly_spread(directions: np.ndarray, count: int) -> np.ndarray:
-    """Indices of ``count`` of the (n, 3) unit directions, spread evenly: the one nearest the
-    view axis (+z), then each time the one farthest from those chosen (sorted).
-
-    >>> evenly_spread(np.array([[0, 0, 1.0], [0.1, 0, 0.995], [0.6, 0, 0.8], [-0.6, 0, 0.8]]), 3)
-    array([0, 2, 3])
-    """
-    chosen = [int(np.argmax(directions[:, 2]))]
-    nearest = directions @ directions[chosen[0]]
-    while len(chosen) < min(count, len(directions)):
-        chosen.append(int(np.argmin(nearest)))
-        nearest = np.maximum(nearest, directions @ directions[chosen[-1]])
-    return np.sort(chosen)
-
-
 def cases(groups, sets, data: Path, cache: Path, names=None):
     """(group, name, light set, function reading the subject) for every case asked for."""
-    for group, objects in (("benchmark", scenes.OBJECTS), ("single", scenes.SINGLE_MATERIAL)):
+    for group, objects in (("benchmark", scenes.OBJECTS), ("single", scenes.SINGLE_MATERIAL),
+                           ("diligent-rig", scenes.ON_DILIGENT_RIG)):
         if group not in groups:
             continue
         for obj in objects:
@@ -92,7 +82,7 @@ def cases(groups, sets, data: Path, cache: Path, names=None):
                 def read(name=name, label=label):
                     subject = read_diligent_object(data / "DiLiGenT", name)
                     if int(label) < subject.n_images:
-                        subject = subject.select(evenly_spread(subject.light_directions, int(label)))
+                        subject = subject.select(scenes.evenly_spread(subject.light_directions, int(label)))
                     return subject
                 yield "diligent", name, label, read
     if "synthetic" in groups:

@@ -40,6 +40,7 @@ import torch
 import trimesh
 from scipy.ndimage import gaussian_filter
 
+from unps.data.diligent import find_diligent_object
 from unps.data.layout import DIRECTIONS, FILENAMES, INTENSITIES, MASK, NORMALS
 from unps.io.files import atomic_dir, atomic_path
 from unps.io.images import write_png8, write_png16
@@ -72,6 +73,8 @@ class BenchmarkObject:
             :data:`SINGLE_MATERIAL`).
         storage: one of :data:`FORMATS`.
         seed: draws the pose, patches, texture, lights and camera.
+        rig: ``drawn`` (:func:`draw_rig`) or ``diligent``: DiLiGenT's own 96 lights, directions and
+            intensities as ball's files give them (:func:`diligent_rig`).
     """
 
     name: str
@@ -79,11 +82,15 @@ class BenchmarkObject:
     materials: tuple[str, ...]
     storage: str
     seed: int
+    rig: str = "drawn"
 
     def key(self, camera: bool = True) -> str:
-        """A short hash of everything that makes its radiance (and, with ``camera``, its captures)."""
+        """A short hash of everything that makes its radiance (and, with ``camera``, its captures);
+        the drawn rig, the first, adds nothing to it."""
         spec = {**asdict(self), "version": SCENE_VERSION, "resolution": RESOLUTION, "spp": SPP,
                 "bounces": BOUNCES}
+        if self.rig == "drawn":
+            del spec["rig"]
         if camera:
             spec["camera"] = CAMERA_VERSION
         return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:10]
@@ -217,6 +224,11 @@ lights, camera and storage (the same seed), so that a network's error on an obje
 material is read beside its error on the object painted in patches. DiLiGenT's objects are
 mostly of one material, and so are many users' captures."""
 
+ON_DILIGENT_RIG = tuple(replace(obj, rig="diligent") for obj in OBJECTS)
+"""The same 24 objects (shape, pose, materials, camera, storage) lit by DiLiGenT's own dome
+(:func:`diligent_rig`) rather than a rig drawn as the light network's training draws them: the
+lights of a real rig, which the training's layouts did not make."""
+
 
 # rendering --------------------------------------------------------------------------------
 
@@ -245,6 +257,39 @@ def draw_rig(seed: int) -> Rig:
         brightness = rng.uniform(0.6, 1.4, (count, 1))
         rig.intensities[label] = brightness * rng.uniform(0.95, 1.05, (count, 3))
     return rig
+
+
+def diligent_rig(data: Path) -> Rig:
+    """DiLiGenT's dome as ball's files give it (``<data>/DiLiGenT``): its 96 light directions and
+    RGB intensities, and the sets of 20 and 12 evenly spread over them (:func:`evenly_spread`),
+    as the light benchmark takes DiLiGenT's objects.
+
+    Raises:
+        InputError: DiLiGenT's ball is not under ``data``.
+    """
+    folder = find_diligent_object(data / "DiLiGenT", "ball")
+    directions = np.loadtxt(folder / DIRECTIONS, dtype=np.float64)
+    intensities = np.loadtxt(folder / INTENSITIES, dtype=np.float64)
+    rig = Rig()
+    for label, count in LIGHT_SETS.items():
+        chosen = evenly_spread(directions, count)
+        rig.directions[label], rig.intensities[label] = directions[chosen], intensities[chosen]
+    return rig
+
+
+def evenly_spread(directions: np.ndarray, count: int) -> np.ndarray:
+    """Indices of ``count`` of the (n, 3) unit directions, spread evenly: the one nearest the
+    view axis (+z), then each time the one farthest from those chosen (sorted).
+
+    >>> evenly_spread(np.array([[0, 0, 1.0], [0.1, 0, 0.995], [0.6, 0, 0.8], [-0.6, 0, 0.8]]), 3)
+    array([0, 2, 3])
+    """
+    chosen = [int(np.argmax(directions[:, 2]))]
+    nearest = directions @ directions[chosen[0]]
+    while len(chosen) < min(count, len(directions)):
+        chosen.append(int(np.argmin(nearest)))
+        nearest = np.maximum(nearest, directions @ directions[chosen[-1]])
+    return np.sort(chosen)
 
 
 def hemispherical_albedo(brdf, samples: int = 4096, seed: int = 0) -> np.ndarray:
@@ -414,7 +459,7 @@ def make_captures(obj: BenchmarkObject, data: Path, cache: Path, progress=None) 
     folders = {label: cache / f"{obj.name}-{obj.key()}" / label for label in LIGHT_SETS}
     if all((folder / "benchmark.json").is_file() for folder in folders.values()):
         return folders
-    rig = draw_rig(obj.seed)
+    rig = diligent_rig(data) if obj.rig == "diligent" else draw_rig(obj.seed)
     stored_radiance = cache / "radiance" / f"{obj.name}-{obj.key(camera=False)}.npz"
     if stored_radiance.is_file():
         with np.load(stored_radiance) as f:
