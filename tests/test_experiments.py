@@ -1033,3 +1033,22 @@ def test_light_benchmark_diligent_rig_group_lights_the_same_objects_with_diligen
         np.testing.assert_array_equal(rig.directions[label], directions[chosen])
     found = list(benchmark.cases(["diligent-rig"], ["96"], folder.parents[2], folder, names=["pits"]))
     assert [(group, name, label) for group, name, label, _ in found] == [("diligent-rig", "pits", "96")]
+
+
+def test_lamps_study_evens_out_each_lamps_brightness_and_colour_from_its_true_intensity():
+    """``lamps alike``: each image divided by its light's RGB intensity — the images a rig of
+    equal white lamps would give; ``lamps white``: times that intensity's mean, brightness kept."""
+    lamps = load_script("lb_lamps", "experiments/light_benchmark/lamps.py")
+    subject = render_lambertian(shape="sphere", size=24, n_lights=8, seed=2)
+    rng = np.random.default_rng(0)
+    tinted = subject.replace(light_intensities=rng.uniform(0.4, 2.0, (8, 3)).astype(np.float32))
+    alike, white = lamps.evened(tinted, keep_brightness=False), lamps.evened(tinted, keep_brightness=True)
+    assert alike.light_intensities is None and white.light_intensities is None
+    np.testing.assert_allclose(alike.observed_images(), tinted.images, rtol=1e-5, atol=1e-7)
+    brightness = tinted.light_intensities.mean(1)[:, None, None, None]
+    np.testing.assert_allclose(white.observed_images(), tinted.images * brightness, rtol=1e-5, atol=1e-7)
+    seen = []
+    result = lamps.run_case(tinted, lambda s: seen.append(s) or Lights(subject.light_directions, None, "x"))
+    assert list(result) == list(lamps.READINGS) and seen[0] is tinted
+    assert all(error == pytest.approx(0, abs=1e-3) for error in result.values())
+    assert lamps.report({("diligent", "ball", "8"): result}).splitlines()[-1].split()[:3] == ["diligent", "8", "1"]
