@@ -1,5 +1,5 @@
-"""How should the light network's bins be read? Soft-arg-max at several temperatures, arg-max, and
-a soft-arg-max kept to the bins around the peak.
+"""How should the light network's bins be read? Soft-arg-max at several temperatures, the mean unit
+vector, arg-max, and with the training's prior over the bins divided out.
 
     python experiments/light_benchmark/decoding.py               # benchmark, single, DiLiGenT, unps's renders
     python experiments/light_benchmark/decoding.py --only diligent --sets 12
@@ -29,8 +29,8 @@ import torch
 
 from unps.lightnet.bins import (ANGLE_BINS, ANGLE_RANGE, INTENSITY_RANGE, angles_to_direction, bin_centres,
                                decode, direction_to_angles, to_bin)
-from unps.lightnet.rig import draw_lights
 from unps.lightnet.estimate import FRAMINGS, network_input, paired
+from unps.lightnet.rig import draw_lights
 from unps.lightnet.symmetry import SYMMETRIES, frame_matrix, mean_direction, transform_images
 from unps.lightnet.system import load_lightnet
 from unps.metrics import light_direction_mae, light_intensity_error, light_slant_bias
@@ -94,8 +94,8 @@ def read_directions(logits: dict, how: str) -> torch.Tensor:
     """(n, 3) unit directions from one pass's (n, 36) angle logits, read as ``how`` (:data:`DECODINGS`)."""
     az, el = logits["azimuth"], logits["elevation"]
     if how.startswith("prior"):
-        weight = float(how.removeprefix("prior") or 1)
-        az, el = az - weight * training_prior(), el - weight * training_prior()
+        log_prior = float(how.removeprefix("prior") or 1) * training_prior()
+        az, el = az - log_prior, el - log_prior
         how = "soft"
     name, _, temperature = how.partition("T")
     if temperature:
@@ -137,7 +137,7 @@ def run_case(subject, net, resolution: int) -> dict:
 def report(rows: dict) -> str:
     """Per group and light set: the mean direction error under each decoding (the lowest marked
     *), then the median slant bias under each."""
-    head = f"{'group':<9} {'set':>4} {'cases':>5}  " + "".join(f"{h:>11}" for h in DECODINGS)
+    head = f"{'group':<13} {'set':>4} {'cases':>5}  " + "".join(f"{h:>11}" for h in DECODINGS)
     blocks = []
     for key, title in (("error", "mean direction error"), ("slant", "median slant bias")):
         lines = [title, head]
@@ -145,7 +145,7 @@ def report(rows: dict) -> str:
             values = [[r[h][key] for h in DECODINGS] for r in chosen]
             summary = np.mean(values, 0) if key == "error" else np.median(values, 0)
             best = int(np.argmin(summary)) if key == "error" else -1
-            lines.append(f"{group:<9} {label:>4} {len(chosen):>5}  " + "".join(
+            lines.append(f"{group:<13} {label:>4} {len(chosen):>5}  " + "".join(
                 f"{v:>10.2f}{'*' if k == best else '°'}" for k, v in enumerate(summary)))
         blocks.append("\n".join(lines))
     return "\n\n".join(blocks)
