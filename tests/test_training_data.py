@@ -189,6 +189,11 @@ def test_light_layouts_give_unit_directions_toward_the_camera(layout):
         assert (lights[:, 2] >= math.cos(math.radians(60)) - 1e-6).all()
     if layout == "ring":
         assert len(torch.unique(lights[:, 2].round(decimals=5))) <= 3
+    if layout == "panel":                       # lamps evenly spaced on a board: a grid in tangents
+        tangents = lights[:, :2] / lights[:, 2:]
+        distances = torch.cdist(tangents, tangents) + torch.eye(64) * 1e9
+        nearest = distances.min(dim=1).values
+        assert float(nearest.max() / nearest.min()) < 1.25
 
 
 def test_a_dataset_iterates_over_its_length_and_no_further():

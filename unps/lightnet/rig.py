@@ -1,9 +1,11 @@
 """The capture rig of the light network's training data: where the lights stand, and the camera.
 
-Light layouts copy real rigs: a uniform cap, a DiLiGenT-like dome (a grid in the image plane's
-light components), and rings at fixed zeniths. The camera exposes, adds noise, saturates at its
-full scale and stores the result the way files store it (8-bit rounded, 8-bit truncated from a
-16-bit source, 16-bit, float), so the network sees values as unps reads them from such files.
+Light layouts copy real rigs: a uniform cap, a dome (a jittered grid in the image plane's light
+components), rings at fixed zeniths, and a panel (a flat board of lamps facing the object, as
+DiLiGenT's LEDs stand: a rectangular grid in the lights' tangents). The camera exposes, adds
+noise, saturates at its full scale and stores the result the way files store it (8-bit rounded,
+8-bit truncated from a 16-bit source, 16-bit, float), so the network sees values as unps reads
+them from such files.
 
 Frame: x right, y up, z toward the camera.
 """
@@ -17,7 +19,7 @@ import torch
 
 from unps.device import to_device
 
-LAYOUTS = ("cap", "dome", "ring")
+LAYOUTS = ("cap", "dome", "ring", "panel")
 FORMATS = ("float", "round8", "floor8", "round16")
 
 
@@ -62,6 +64,29 @@ def ring_lights(count: int, max_zenith_deg: float, generator: torch.Generator) -
     return torch.cat(out)[torch.randperm(count, generator=generator)]
 
 
+def panel_lights(count: int, max_zenith_deg: float, generator: torch.Generator) -> torch.Tensor:
+    """(count, 3) directions to lamps on a flat board facing the object, as DiLiGenT's 12 × 8 LEDs:
+    a rectangular grid of rows × columns (their ratio between ½ and 2) evenly spaced in
+    (l_x / l_z, l_y / l_z), its corners at a zenith between a third of ``max_zenith_deg`` and
+    all of it, its centre off the view axis by up to a tenth of its reach, turned by up to 10°
+    and jittered by 5 % of a spacing; the first ``count`` grid points in a random order."""
+    u = lambda *shape: torch.rand(*shape, generator=generator)    # noqa: E731
+    aspect = 2 ** (2 * float(u(1)) - 1)
+    columns = max(1, round(math.sqrt(count * aspect)))
+    rows = math.ceil(count / columns)
+    reach = math.tan(math.radians(max_zenith_deg * (1 + 2 * float(u(1))) / 3))
+    spacing = reach / max(math.hypot(columns - 1, rows - 1) / 2, 0.5)
+    x = (torch.arange(columns) - (columns - 1) / 2) * spacing
+    y = (torch.arange(rows) - (rows - 1) / 2) * spacing
+    grid = torch.stack(torch.meshgrid(x, y, indexing="xy"), -1).reshape(-1, 2)
+    grid = grid + (u(len(grid), 2) - 0.5) * 0.1 * spacing
+    turn = math.radians(20 * float(u(1)) - 10)
+    rotation = torch.tensor([[math.cos(turn), -math.sin(turn)], [math.sin(turn), math.cos(turn)]])
+    centre = (u(2) - 0.5) * 0.2 * reach
+    tangents = (grid @ rotation.T + centre)[torch.randperm(len(grid), generator=generator)[:count]]
+    return torch.nn.functional.normalize(torch.cat([tangents, torch.ones(count, 1)], -1), dim=-1)
+
+
 def draw_lights(weights: dict[str, float], count: int, max_zenith_deg: float,
                 generator: torch.Generator) -> torch.Tensor:
     """(count, 3) unit directions from one of :data:`LAYOUTS`, drawn by weight."""
@@ -69,7 +94,7 @@ def draw_lights(weights: dict[str, float], count: int, max_zenith_deg: float,
     p = torch.tensor([weights[name] for name in names], dtype=torch.float64)
     name = names[0] if len(names) == 1 else \
         names[int(torch.multinomial(p / p.sum(), 1, generator=generator))]   # one: no draw
-    layout = {"cap": cap_lights, "dome": dome_lights, "ring": ring_lights}[name]
+    layout = {"cap": cap_lights, "dome": dome_lights, "ring": ring_lights, "panel": panel_lights}[name]
     return layout(count, max_zenith_deg, generator)
 
 
