@@ -1052,3 +1052,15 @@ def test_lamps_study_evens_out_each_lamps_brightness_and_colour_from_its_true_in
     assert list(result) == list(lamps.READINGS) and seen[0] is tinted
     assert all(error == pytest.approx(0, abs=1e-3) for error in result.values())
     assert lamps.report({("diligent", "ball", "8"): result}).splitlines()[-1].split()[:3] == ["diligent", "8", "1"]
+
+
+def test_reach_study_bins_each_case_by_its_drawn_rigs_farthest_light():
+    """A rig's reach is its farthest light from the view axis; the drawn 96-light domes reach
+    between a third of 50° and 50°, and the bins cover every reach once."""
+    reach = load_script("lb_reach", "experiments/light_benchmark/reach.py")
+    tilted = np.array([[0.0, 0.0, 1.0], [np.sin(np.radians(30)), 0.0, np.cos(np.radians(30))]])
+    assert reach.reach_deg(tilted) == pytest.approx(30.0)
+    drawn = [reach.reach_deg(reach.scenes.draw_rig(obj.seed).directions["96"]) for obj in reach.scenes.OBJECTS]
+    assert all(50 / 3 - 1 < r < 50.01 for r in drawn) and max(drawn) - min(drawn) > 20
+    edges = [edge for bin_ in reach.BINS for edge in bin_]
+    assert edges[0] == 0 and edges[-1] == 90 and all(a == b for a, b in zip(edges[1:-1:2], edges[2::2]))
