@@ -1054,13 +1054,24 @@ def test_lamps_study_evens_out_each_lamps_brightness_and_colour_from_its_true_in
     assert lamps.report({("diligent", "ball", "8"): result}).splitlines()[-1].split()[:3] == ["diligent", "8", "1"]
 
 
-def test_reach_study_bins_each_case_by_its_drawn_rigs_farthest_light():
-    """A rig's reach is its farthest light from the view axis; the drawn 96-light domes reach
-    between a third of 50° and 50°, and the bins cover every reach once."""
+def test_reach_study_reads_each_light_against_its_zenith_under_both_rigs():
+    """Light by light: zenith, error and zenith error; objects binned by the drawn rig's reach,
+    lights by their own zenith, and DiLiGenT's lights read as a drawn rig's at the same zenith."""
     reach = load_script("lb_reach", "experiments/light_benchmark/reach.py")
-    tilted = np.array([[0.0, 0.0, 1.0], [np.sin(np.radians(30)), 0.0, np.cos(np.radians(30))]])
-    assert reach.reach_deg(tilted) == pytest.approx(30.0)
-    drawn = [reach.reach_deg(reach.scenes.draw_rig(obj.seed).directions["96"]) for obj in reach.scenes.OBJECTS]
-    assert all(50 / 3 - 1 < r < 50.01 for r in drawn) and max(drawn) - min(drawn) > 20
-    edges = [edge for bin_ in reach.BINS for edge in bin_]
-    assert edges[0] == 0 and edges[-1] == 90 and all(a == b for a, b in zip(edges[1:-1:2], edges[2::2]))
+    subject = render_lambertian(shape="sphere", size=16, n_lights=6, seed=2)
+    truth = subject.light_directions
+    tilted = truth.copy()
+    tilted[0] = [0.0, 0.0, 1.0]                                  # one light read on the view axis
+    result = reach.run_case(subject, lambda s: Lights(tilted, None, "x"))
+    np.testing.assert_allclose(result["zenith"], reach.zenith_deg(truth.astype(np.float64)), atol=1e-4)
+    assert result["error"][0] == pytest.approx(result["zenith"][0], abs=1e-4)
+    assert result["zenith_error"][0] == pytest.approx(-result["zenith"][0], abs=1e-4)
+    assert max(result["error"][1:]) < 0.01               # float32 directions: arccos near 1
+
+    def case(zeniths, errors):
+        return {"zenith": zeniths, "error": errors, "zenith_error": [0.0] * len(zeniths)}
+    rows = {("benchmark", "a", "12"): case([5, 15], [1, 3]), ("diligent-rig", "a", "12"): case([15, 15], [5, 5]),
+            ("benchmark", "rose", "12"): case([5, 15], [60, 60]), ("diligent-rig", "rose", "12"): case([5, 5], [60, 60])}
+    assert reach.paired_objects(rows, "12") == ["a"]
+    assert "0–25°        1      2.00°         5.00°" in reach.by_reach(rows)
+    assert "DiLiGenT's 5.00°, DiLiGenT's lights read as drawn ones at their zenith 3.00°" in reach.by_zenith(rows)

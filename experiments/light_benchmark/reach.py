@@ -1,74 +1,141 @@
-"""The network's error against how far from the view its lights reach, under the drawn rigs and DiLiGenT's.
+"""The network's error against how far from the view its lights stand, under the drawn rigs and DiLiGenT's.
 
-    python experiments/light_benchmark/reach.py --tag netT       # results of benchmark.py --tag …
-    python experiments/light_benchmark/reach.py --tag netT --final
+    python experiments/light_benchmark/reach.py            # both groups, every light set: ~3 min
+    python experiments/light_benchmark/reach.py --report   # the tables from the cases run so far
 
 Each object of the benchmark is lit twice: by a rig drawn as the light network's training draws
-them (``benchmark`` group, :func:`scenes.draw_rig`) and by DiLiGenT's own dome (``diligent-rig``,
-:func:`scenes.diligent_rig`). A rig's reach is the largest angle between one of its lights and the
-view axis (drawn 96-light domes: 17–50°; DiLiGenT's dome 43°, and its 20 and 12 evenly spread
-sets reach its edge). For each light set, the cases are binned by the drawn rig's reach, and each
-bin prints the mean direction error of the same objects under both rigs (the network's, the first
-stage of each case; with ``--final``, the last stage's), less the objects that every network reads
-inside out (:data:`by_material.INSIDE_OUT`, whose 40–70° would swamp the rest).
+them (``benchmark`` group, :func:`scenes.draw_rig`: 96-light domes reaching 17–50° from the view)
+and by DiLiGenT's own dome (``diligent-rig``, :func:`scenes.diligent_rig`: 43°, its 20 and 12
+evenly spread sets reaching its edge). Per case the network's lights (``light=selfcal``'s first
+stage, eight passes, no stage after it) are compared light by light with the truth: each light's
+zenith (its angle from the view axis), its direction error and its zenith error (estimate − truth,
+< 0 where it is read nearer the view). Two tables, both without the objects every network reads
+inside out (:data:`by_material.INSIDE_OUT`, whose 40–70° would swamp the rest):
+
+- **by the drawn rig's reach**: the objects binned by how far the drawn rig's farthest light
+  stands, each bin's mean error under both rigs;
+- **by each light's zenith**: every light of every object binned by its own zenith, the mean
+  error and zenith error per bin under both rigs, and what DiLiGenT's rig would give if each of
+  its lights were read as well as a drawn rig's light at the same zenith (``as drawn``): the part
+  of the gap the lights' zeniths explain.
+
+Results are kept case by case in ``--out`` (default ``<cache>/reach``); a rerun resumes. None of
+it feeds training.
 """
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import benchmark  # noqa: E402
 import scenes  # noqa: E402
-from benchmark import DEFAULT_CACHE, DEFAULT_DATA  # noqa: E402
-from by_material import INSIDE_OUT, stage_errors  # noqa: E402
+from by_material import INSIDE_OUT  # noqa: E402
 
-BINS = ((0.0, 25.0), (25.0, 40.0), (40.0, 90.0))
-"""Reach bins of the drawn rigs, in degrees from the view axis; DiLiGenT's dome falls in the last."""
+REACH_BINS = ((0.0, 25.0), (25.0, 40.0), (40.0, 90.0))
+"""Bins of the drawn rigs' reach, degrees from the view axis; DiLiGenT's dome falls in the last."""
+ZENITH_BINS = ((0.0, 10.0), (10.0, 20.0), (20.0, 30.0), (30.0, 40.0), (40.0, 90.0))
+"""Bins of a light's own zenith, degrees."""
+GROUPS = ("benchmark", "diligent-rig")
 
 
-def reach_deg(directions: np.ndarray) -> float:
-    """The largest angle (degrees) between one of the (n, 3) unit light directions and the view
-    axis +z.
+def zenith_deg(directions: np.ndarray) -> np.ndarray:
+    """(n,) angles in degrees between the (n, 3) unit light directions and the view axis +z.
 
-    >>> round(reach_deg(np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8]])), 2)
-    36.87
+    >>> zenith_deg(np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8]])).round(2).tolist()
+    [0.0, 36.87]
     """
-    return float(np.degrees(np.arccos(np.clip(directions[:, 2], -1, 1))).max())
+    return np.degrees(np.arccos(np.clip(directions[:, 2], -1, 1)))
+
+
+def run_case(subject, network) -> dict:
+    """Light by light: the true zenith, the network's direction error and zenith error (degrees)."""
+    estimate = network(subject).directions.astype(np.float64)
+    estimate /= np.linalg.norm(estimate, axis=1, keepdims=True)
+    truth = subject.light_directions.astype(np.float64)
+    zenith = zenith_deg(truth)
+    return {"zenith": zenith.tolist(),
+            "error": np.degrees(np.arccos(np.clip((estimate * truth).sum(1), -1, 1))).tolist(),
+            "zenith_error": (zenith_deg(estimate) - zenith).tolist()}
+
+
+def paired_objects(rows: dict, label: str) -> list[str]:
+    """The objects of light set ``label`` run under both rigs, less :data:`INSIDE_OUT`, sorted."""
+    return sorted(name for group, name, set_ in rows if group == GROUPS[0] and set_ == label
+                  and (GROUPS[1], name, label) in rows and name not in INSIDE_OUT)
+
+
+def by_reach(rows: dict) -> str:
+    """Per light set and bin of the drawn rig's reach: the objects' mean error under both rigs."""
+    lines = [f"{'lights':>6} {'drawn reach':>12} {'objects':>8} {'drawn rig':>10} {'DiLiGenT rig':>13}"]
+    for label in scenes.LIGHT_SETS:
+        names = paired_objects(rows, label)
+        if not names:
+            continue
+        mean = {(g, n): float(np.mean(rows[g, n, label]["error"])) for g in GROUPS for n in names}
+        reach = {n: max(rows[GROUPS[0], n, label]["zenith"]) for n in names}
+        for low, high in (*REACH_BINS, (0.0, 90.0)):
+            chosen = [n for n in names if low <= reach[n] < high]
+            if chosen:
+                span = "all" if (low, high) == (0.0, 90.0) else f"{low:.0f}–{high:.0f}°"
+                lines.append(f"{label:>6} {span:>12} {len(chosen):>8} "
+                             + " ".join(f"{np.mean([mean[g, n] for n in chosen]):>{w}.2f}°"
+                                        for g, w in zip(GROUPS, (9, 12))))
+    return "\n".join(lines)
+
+
+def by_zenith(rows: dict) -> str:
+    """Per light set and bin of a light's own zenith: lights, mean error and mean zenith error
+    under both rigs; then each rig's mean and DiLiGenT's rig read as the drawn one per bin."""
+    lines = [f"{'lights':>6} {'zenith':>8}" + "".join(
+        f"  {f'{g}: lights':>20} {'error':>7} {'zenith err':>10}" for g in GROUPS)]
+    for label in scenes.LIGHT_SETS:
+        names = paired_objects(rows, label)
+        if not names:
+            continue
+        pooled = {g: {k: np.concatenate([rows[g, n, label][k] for n in names])
+                      for k in ("zenith", "error", "zenith_error")} for g in GROUPS}
+        drawn_error = {}
+        for low, high in ZENITH_BINS:
+            cells = []
+            for g in GROUPS:
+                inside = (pooled[g]["zenith"] >= low) & (pooled[g]["zenith"] < high)
+                if g == GROUPS[0] and inside.any():
+                    drawn_error[low, high] = float(pooled[g]["error"][inside].mean())
+                error, tilt = pooled[g]["error"][inside], pooled[g]["zenith_error"][inside]
+                cells.append(f"  {int(inside.sum()):>20} " + (f"{error.mean():>6.2f}° {tilt.mean():>+9.2f}°"
+                                                            if inside.any() else f"{'–':>7} {'–':>10}"))
+            lines.append(f"{label:>6} {f'{low:.0f}–{high:.0f}°':>8}" + "".join(cells))
+        dome = pooled[GROUPS[1]]
+        as_drawn = [drawn_error.get(next(b for b in ZENITH_BINS if b[0] <= z < b[1])) for z in dome["zenith"]]
+        read_as_drawn = (f"{np.mean(as_drawn):.2f}°" if None not in as_drawn else
+                         "– (a zenith bin the drawn rig leaves empty)")
+        lines.append(f"{label:>6} {'all':>8} drawn rig {pooled[GROUPS[0]]['error'].mean():.2f}°, "
+                     f"DiLiGenT's {dome['error'].mean():.2f}°, DiLiGenT's lights read as drawn ones "
+                     f"at their zenith {read_as_drawn}")
+    return "\n".join(lines)
+
+
+def report(rows: dict) -> str:
+    names = sorted({n for _, n, _ in rows} - set(INSIDE_OUT))
+    return (f"network's lights, {len(names)} objects read the right way round "
+            f"(without {', '.join(INSIDE_OUT)})\n\nby the drawn rig's reach\n{by_reach(rows)}\n\n"
+            f"by each light's zenith\n{by_zenith(rows)}")
+
+
+def progress(case: tuple, row: dict, result: dict) -> str:
+    return f"{' '.join(case)}: error {np.mean(row['error']):.2f}°, reach {max(row['zenith']):.1f}°"
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
-    parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
-    parser.add_argument("--tag", required=True,
-                        help="a results folder of benchmark.py --tag holding both groups")
-    parser.add_argument("--final", action="store_true", help="the last stage's error, not the network's")
+    parser = benchmark.study_parser(__doc__.split("\n")[0], "default: <cache>/reach", groups=GROUPS)
     args = parser.parse_args()
-    results = args.cache / "results" / args.tag
-    if not results.is_dir():
-        parser.error(f"no results folder for --tag {args.tag} in {args.cache / 'results'}")
-    drawn, dome = (stage_errors(results, group, args.final) for group in ("benchmark", "diligent-rig"))
-    dome_rig = scenes.diligent_rig(args.data)
-    names = [obj.name for obj in scenes.OBJECTS if obj.name not in INSIDE_OUT]
-    print(("final lights" if args.final else "network") + f" (tag {args.tag}): direction error of the "
-          f"{len(names)} objects read the right way round, binned by the drawn rig's reach")
-    print(f"{'lights':>6} {'drawn reach':>12} {'objects':>8} {'drawn rig':>10} {'DiLiGenT rig':>13}")
-    for label in scenes.LIGHT_SETS:
-        reaches = {obj.name: reach_deg(scenes.draw_rig(obj.seed).directions[label]) for obj in scenes.OBJECTS}
-        cases = [name for name in names if (name, label) in drawn and (name, label) in dome]
-        for low, high in BINS:
-            chosen = [name for name in cases if low <= reaches[name] < high]
-            if chosen:
-                print(f"{label:>6} {f'{low:.0f}–{high:.0f}°':>12} {len(chosen):>8} "
-                      f"{np.mean([drawn[n, label] for n in chosen]):>9.2f}° "
-                      f"{np.mean([dome[n, label] for n in chosen]):>12.2f}°")
-        print(f"{label:>6} {'all':>12} {len(cases):>8} {np.mean([drawn[n, label] for n in cases]):>9.2f}° "
-              f"{np.mean([dome[n, label] for n in cases]):>12.2f}°   (DiLiGenT's set reaches "
-              f"{reach_deg(dome_rig.directions[label]):.1f}°)")
+    out = args.out or args.cache / "reach"
+    benchmark.network_study(parser, args, out, {"scenes": scenes.SCENE_VERSION, "study": "reach"},
+                            run_case, report, progress)
 
 
 if __name__ == "__main__":
