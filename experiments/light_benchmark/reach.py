@@ -1,6 +1,6 @@
 """The network's error against how far from the view its lights stand, under the drawn rigs and DiLiGenT's.
 
-    python experiments/light_benchmark/reach.py            # both groups, every light set: ~3 min
+    python experiments/light_benchmark/reach.py            # both groups, every light set: ~2 min
     python experiments/light_benchmark/reach.py --report   # the tables from the cases run so far
 
 Each object of the benchmark is lit twice: by a rig drawn as the light network's training draws
@@ -35,6 +35,8 @@ import benchmark  # noqa: E402
 import scenes  # noqa: E402
 from by_material import INSIDE_OUT  # noqa: E402
 
+from unps.metrics import angular_error  # noqa: E402
+
 REACH_BINS = ((0.0, 25.0), (25.0, 40.0), (40.0, 90.0))
 """Bins of the drawn rigs' reach, degrees from the view axis; DiLiGenT's dome falls in the last."""
 ZENITH_BINS = ((0.0, 10.0), (10.0, 20.0), (20.0, 30.0), (30.0, 40.0), (40.0, 90.0))
@@ -42,23 +44,23 @@ ZENITH_BINS = ((0.0, 10.0), (10.0, 20.0), (20.0, 30.0), (30.0, 40.0), (40.0, 90.
 GROUPS = ("benchmark", "diligent-rig")
 
 
+VIEW = np.array([0.0, 0.0, 1.0])
+
+
 def zenith_deg(directions: np.ndarray) -> np.ndarray:
-    """(n,) angles in degrees between the (n, 3) unit light directions and the view axis +z.
+    """(n,) angles in degrees between the (n, 3) light directions and the view axis +z.
 
     >>> zenith_deg(np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8]])).round(2).tolist()
     [0.0, 36.87]
     """
-    return np.degrees(np.arccos(np.clip(directions[:, 2], -1, 1)))
+    return angular_error(directions, VIEW)
 
 
 def run_case(subject, network) -> dict:
     """Light by light: the true zenith, the network's direction error and zenith error (degrees)."""
-    estimate = network(subject).directions.astype(np.float64)
-    estimate /= np.linalg.norm(estimate, axis=1, keepdims=True)
-    truth = subject.light_directions.astype(np.float64)
+    estimate, truth = network(subject).directions, subject.light_directions
     zenith = zenith_deg(truth)
-    return {"zenith": zenith.tolist(),
-            "error": np.degrees(np.arccos(np.clip((estimate * truth).sum(1), -1, 1))).tolist(),
+    return {"zenith": zenith.tolist(), "error": angular_error(estimate, truth).tolist(),
             "zenith_error": (zenith_deg(estimate) - zenith).tolist()}
 
 
@@ -92,30 +94,32 @@ def by_zenith(rows: dict) -> str:
     under both rigs; then each rig's mean and DiLiGenT's rig read as the drawn one per bin."""
     lines = [f"{'lights':>6} {'zenith':>8}" + "".join(
         f"  {f'{g}: lights':>20} {'error':>7} {'zenith err':>10}" for g in GROUPS)]
+    edges = [low for low, _ in ZENITH_BINS[1:]]
     for label in scenes.LIGHT_SETS:
         names = paired_objects(rows, label)
         if not names:
             continue
         pooled = {g: {k: np.concatenate([rows[g, n, label][k] for n in names])
                       for k in ("zenith", "error", "zenith_error")} for g in GROUPS}
+        bins = {g: np.digitize(pooled[g]["zenith"], edges) for g in GROUPS}
         drawn_error = {}
-        for low, high in ZENITH_BINS:
+        for k, (low, high) in enumerate(ZENITH_BINS):
             cells = []
             for g in GROUPS:
-                inside = (pooled[g]["zenith"] >= low) & (pooled[g]["zenith"] < high)
-                if g == GROUPS[0] and inside.any():
-                    drawn_error[low, high] = float(pooled[g]["error"][inside].mean())
+                inside = bins[g] == k
                 error, tilt = pooled[g]["error"][inside], pooled[g]["zenith_error"][inside]
+                if inside.any() and g == GROUPS[0]:
+                    drawn_error[k] = error.mean()
                 cells.append(f"  {int(inside.sum()):>20} " + (f"{error.mean():>6.2f}° {tilt.mean():>+9.2f}°"
                                                             if inside.any() else f"{'–':>7} {'–':>10}"))
             lines.append(f"{label:>6} {f'{low:.0f}–{high:.0f}°':>8}" + "".join(cells))
-        dome = pooled[GROUPS[1]]
-        as_drawn = [drawn_error.get(next(b for b in ZENITH_BINS if b[0] <= z < b[1])) for z in dome["zenith"]]
-        read_as_drawn = (f"{np.mean(as_drawn):.2f}°" if None not in as_drawn else
+        dome_bins = bins[GROUPS[1]]
+        read_as_drawn = (f"{np.mean([drawn_error[k] for k in dome_bins]):.2f}°"
+                         if set(dome_bins.tolist()) <= set(drawn_error) else
                          "– (a zenith bin the drawn rig leaves empty)")
         lines.append(f"{label:>6} {'all':>8} drawn rig {pooled[GROUPS[0]]['error'].mean():.2f}°, "
-                     f"DiLiGenT's {dome['error'].mean():.2f}°, DiLiGenT's lights read as drawn ones "
-                     f"at their zenith {read_as_drawn}")
+                     f"DiLiGenT's {pooled[GROUPS[1]]['error'].mean():.2f}°, DiLiGenT's lights read as "
+                     f"drawn ones at their zenith {read_as_drawn}")
     return "\n".join(lines)
 
 

@@ -23,6 +23,12 @@ LAYOUTS = ("cap", "dome", "ring", "panel")
 FORMATS = ("float", "round8", "floor8", "round16")
 
 
+def turned(points: torch.Tensor, angle: float) -> torch.Tensor:
+    """(m, 2) points turned counter-clockwise by ``angle`` radians about the origin."""
+    rotation = torch.tensor([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
+    return points @ rotation.T
+
+
 def cap_lights(count: int, max_zenith_deg: float, generator: torch.Generator) -> torch.Tensor:
     """(count, 3) unit directions uniform over the cap within ``max_zenith_deg`` of +z."""
     z = 1 - torch.rand(count, generator=generator) * (1 - math.cos(math.radians(max_zenith_deg)))
@@ -41,9 +47,7 @@ def dome_lights(count: int, max_zenith_deg: float, generator: torch.Generator) -
     t = torch.linspace(-reach, reach, side)
     grid = torch.stack(torch.meshgrid(t, t, indexing="xy"), -1).reshape(-1, 2)
     grid = grid + (u(len(grid), 2) - 0.5) * (2 * reach / max(side - 1, 1)) * 0.3
-    turn = 2 * math.pi * float(u(1))
-    rotation = torch.tensor([[math.cos(turn), -math.sin(turn)], [math.sin(turn), math.cos(turn)]])
-    planar = (grid @ rotation.T)[torch.randperm(len(grid), generator=generator)[:count]]
+    planar = turned(grid, 2 * math.pi * float(u(1)))[torch.randperm(len(grid), generator=generator)[:count]]
     norm = planar.norm(dim=-1, keepdim=True)
     planar = planar * (norm.clamp(max=0.999) / norm.clamp_min(1e-9))   # the jitter may reach past 90°
     return torch.cat([planar, torch.sqrt(1 - (planar ** 2).sum(-1, keepdim=True))], -1)
@@ -80,10 +84,8 @@ def panel_lights(count: int, max_zenith_deg: float, generator: torch.Generator) 
     y = (torch.arange(rows) - (rows - 1) / 2) * spacing
     grid = torch.stack(torch.meshgrid(x, y, indexing="xy"), -1).reshape(-1, 2)
     grid = grid + (u(len(grid), 2) - 0.5) * 0.1 * spacing
-    turn = math.radians(20 * float(u(1)) - 10)
-    rotation = torch.tensor([[math.cos(turn), -math.sin(turn)], [math.sin(turn), math.cos(turn)]])
-    centre = (u(2) - 0.5) * 0.2 * reach
-    tangents = (grid @ rotation.T + centre)[torch.randperm(len(grid), generator=generator)[:count]]
+    tangents = turned(grid, math.radians(20 * float(u(1)) - 10)) + (u(2) - 0.5) * 0.2 * reach
+    tangents = tangents[torch.randperm(len(grid), generator=generator)[:count]]
     return torch.nn.functional.normalize(torch.cat([tangents, torch.ones(count, 1)], -1), dim=-1)
 
 
