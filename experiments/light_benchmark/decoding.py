@@ -29,9 +29,9 @@ import torch
 
 from unps.lightnet.bins import (ANGLE_BINS, ANGLE_RANGE, INTENSITY_RANGE, angles_to_direction, bin_centres,
                                decode, direction_to_angles, to_bin)
-from unps.lightnet.estimate import FRAMINGS, network_input, paired
+from unps.lightnet.estimate import FRAMINGS, network_input, paired, pass_logits
 from unps.lightnet.rig import draw_lights
-from unps.lightnet.symmetry import SYMMETRIES, frame_matrix, mean_direction, transform_images
+from unps.lightnet.symmetry import SYMMETRIES, mean_direction
 from unps.lightnet.system import load_lightnet
 from unps.metrics import light_direction_mae, light_intensity_error, light_slant_bias
 
@@ -107,21 +107,20 @@ def read_directions(logits: dict, how: str) -> torch.Tensor:
 
 
 @torch.no_grad()
-def pass_logits(subject, net, resolution: int) -> list[tuple[dict, torch.Tensor]]:
+def passes_logits(subject, net, resolution: int) -> list[tuple[dict, torch.Tensor]]:
     """The logits of ``light=estimated``'s eight passes, each with its frame matrix M."""
     observed = subject.observed_images()
     inputs = {fill: network_input(observed, subject.mask, resolution, fill) for fill in FRAMINGS}
     out = []
-    for fill, (turns, mirror) in paired(FRAMINGS, SYMMETRIES):
-        images, mask = inputs[fill]
-        logits = net(transform_images(images, turns, mirror), transform_images(mask, turns, mirror))
-        out.append(({k: v[0] for k, v in logits.items()}, frame_matrix(turns, mirror)))
+    for fill, frame in paired(FRAMINGS, SYMMETRIES):
+        logits, matrix = pass_logits(net, *inputs[fill], *frame)
+        out.append(({k: v[0] for k, v in logits.items()}, matrix))
     return out
 
 
 def run_case(subject, net, resolution: int) -> dict:
     """Direction error, slant bias and intensity error of the eight passes' mean under each decoding."""
-    passes = pass_logits(subject, net, resolution)
+    passes = passes_logits(subject, net, resolution)
     truth = subject.light_directions
     intensities = torch.stack([decode(lg["intensity"], *INTENSITY_RANGE, soft=True) for lg, _ in passes])
     intensities = (intensities / intensities.mean(1, keepdim=True)).mean(0).numpy()

@@ -196,10 +196,27 @@ def network_pass(net: torch.nn.Module, images: torch.Tensor, mask: torch.Tensor,
         (n, 3) unit directions in the stack's own frame (x right, y up, z toward the camera) and
         (n,) relative intensities, mean 1.
     """
-    logits = net(transform_images(images, turns, mirror), transform_images(mask, turns, mirror))
+    logits, frame = pass_logits(net, images, mask, turns, mirror)
     seen, relative = decode_lights(logits["azimuth"], logits["elevation"], logits["intensity"],
                                    soft_decode)
-    return seen[0] @ frame_matrix(turns, mirror).to(seen), relative[0] / relative[0].mean()   # Mᵀ·l per row
+    return seen[0] @ frame.to(seen), relative[0] / relative[0].mean()   # Mᵀ·l per row
+
+
+@torch.no_grad()
+def pass_logits(net: torch.nn.Module, images: torch.Tensor, mask: torch.Tensor, turns: int = 0,
+                mirror: bool = False) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
+    """The network's logits for one stack shown under one symmetry of the square, undecoded.
+
+    Args:
+        images: (1, n, 3, R, R) and mask (1, 1, R, R), as :func:`network_input` gives them.
+
+    Returns:
+        The logits by name (``azimuth``, ``elevation``: (1, n, bins); ``intensity``), read in the
+        transformed frame, and the (3, 3) frame matrix M that maps a direction read there back to
+        the stack's own frame (l = l_seen·M, one row per light).
+    """
+    logits = net(transform_images(images, turns, mirror), transform_images(mask, turns, mirror))
+    return logits, frame_matrix(turns, mirror)
 
 
 def paired(framings: Sequence[float], frames: Sequence) -> list[tuple[float, object]]:
