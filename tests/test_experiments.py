@@ -347,6 +347,36 @@ def test_light_benchmark_builds_and_runs_the_light_source_as_the_fit_does():
         ["—", "—"]
 
 
+def test_adequacy_study_reads_each_fits_image_loss_and_keeps_the_free_fit_only_below_the_threshold():
+    """From two benchmark runs of one sphere (the self-calibration held and free), the study's
+    residual is the held fit's image loss (objective less the prior's pull) over the images'
+    mean level, its gain the held error less the free one; the rule keeps the free fit only where
+    the residual is under the threshold, and the report prints the case and its light count."""
+    benchmark = load_script("lb_benchmark", "experiments/light_benchmark/benchmark.py")
+    study = load_script("lb_adequacy", "experiments/light_benchmark/adequacy.py")
+    subject = render_lambertian(shape="sphere", size=32, n_lights=12, seed=2)
+    fast = ["framings=[1.0]", "symmetric=false", "selfcal.steps=200"]
+    held, free = (benchmark.run_case(benchmark.light_source(["selfcal"], fast + extra)[0], subject)
+                  for extra in ([], ["selfcal.prior_weight=0", "selfcal.max_flattening_deg=null"]))
+    level = study.level_of(subject)
+    values = subject.observed_images()[:, subject.mask]
+    assert level == pytest.approx(values.mean() / np.quantile(values, 0.99))
+    row = study.features(held, free, level)
+    evidence = held["stages"][-1]["evidence"]
+    assert row["residual"] == pytest.approx((evidence["loss"] - evidence["prior"]) / level)
+    assert row["gain"] == pytest.approx(held["stages"][-1]["dir"] - free["stages"][-1]["dir"])
+    assert row["moved"] == free["stages"][-1]["evidence"]["moved_deg"] > 0
+    assert study.kept([row], row["residual"] * 2) == (pytest.approx(row["free"]), pytest.approx(-row["gain"]))
+    assert study.kept([row], row["residual"] / 2) == (pytest.approx(row["held"]), 0.0)
+    declined = {"stages": [*held["stages"][:-1], {**held["stages"][-1], "evidence": {}}]}
+    assert study.features(declined, free, level) is None
+    text = study.report({("benchmark", "sphere", "12"): row, ("benchmark", "cube", "12"): {**row, "residual": 1.0},
+                         ("benchmark", "cone", "12"): {**row, "gain": -1.5, "residual": 2.0}})
+    lines = text.splitlines()
+    assert any(line.split()[:3] == ["benchmark", "sphere", "12"] for line in lines) and "3 cases" in text
+    assert lines[-1].split()[:2] == ["12", "3"]
+
+
 def test_steepened_study_reads_the_network_lights_slant_and_the_error_of_steepening_them():
     """Lights read 2° nearer the view axis than the truth: slant bias −2°, and among the steps
     the error is lowest at +2° (where it is 0)."""
