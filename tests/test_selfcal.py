@@ -329,6 +329,27 @@ def test_a_fit_that_takes_the_lights_nearer_the_view_axis_is_declined(glossy, ca
         self_calibrate(glossy, flat, SelfCalibration(max_flattening_deg=-1))
 
 
+@pytest.mark.slow
+def test_the_frame_held_fit_comes_first_and_the_pulled_fit_only_where_it_is_declined(glossy):
+    """``frame_held_first``: from lights read 4° too flat, the fit with the shared frame held and
+    no pull is kept, as that fit alone gives it; from lights read 4° too grazing, that fit takes
+    them toward the view axis and is declined, and the pulled fit decides, as it alone would, its
+    verdict naming the declined fit and carrying its evidence."""
+    settings = dict(steps=1000, max_pixels=600)
+    flat = turned_from_the_view(glossy, -4)
+    first, verdict = self_calibrate(glossy, flat, SelfCalibration(**settings, frame_held_first=True))
+    alone, _ = self_calibrate(glossy, flat, SelfCalibration(**settings, hold_frame=True, prior_weight=0.0))
+    assert verdict.outcome == "changed" and verdict.reason.startswith("with the shared frame held: ")
+    np.testing.assert_array_equal(first.directions, alone.directions)
+    steep = turned_from_the_view(glossy, 4)
+    second, verdict = self_calibrate(glossy, steep, SelfCalibration(**settings, frame_held_first=True))
+    pulled, pulled_verdict = self_calibrate(glossy, steep, SelfCalibration(**settings))
+    assert "(the fit with the shared frame held was declined: " in verdict.reason
+    assert verdict.evidence["frame_held_flattened_deg"] > 1.0
+    assert verdict.outcome == pulled_verdict.outcome
+    np.testing.assert_array_equal(second.directions, pulled.directions)
+
+
 def test_the_pull_toward_the_network_loosens_where_its_passes_disagree():
     from unps.lights.prior import network_prior
 
