@@ -164,7 +164,8 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
         subject: its captured images (``observed_images()``) and mask are used.
         lights: the first guess, (n, 3) unit directions and (n, 3) intensities (or None: 1).
         observe: called as the fit goes (:func:`fit`) with the step and the (n, 3) directions the
-            fit would return if it stopped there.
+            fit would return if it stopped there; with ``settings.frame_held_first``, by each fit
+            in turn (the pulled fit's steps start again at 0).
 
     Raises:
         InputError: fewer than 4 images, or no light reaching the object in any image.
