@@ -355,7 +355,7 @@ def test_adequacy_study_reads_each_fits_image_loss_and_keeps_the_free_fit_only_b
     benchmark = load_script("lb_benchmark", "experiments/light_benchmark/benchmark.py")
     study = load_script("lb_adequacy", "experiments/light_benchmark/adequacy.py")
     subject = render_lambertian(shape="sphere", size=32, n_lights=12, seed=2)
-    fast = ["framings=[1.0]", "symmetric=false", "selfcal.steps=200"]
+    fast = ["framings=[1.0]", "symmetric=false", "selfcal.steps=200", "selfcal.frame_held_first=false"]
     held, free = (benchmark.run_case(benchmark.light_source(["selfcal"], fast + extra)[0], subject)
                   for extra in ([], ["selfcal.prior_weight=0", "selfcal.max_flattening_deg=null"]))
     level = study.level_of(subject)

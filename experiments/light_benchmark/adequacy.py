@@ -1,12 +1,13 @@
 """Free the lights where the held fit's model already renders the images? A keep-or-discard test
 for the free self-calibration that asks how much of the images the model leaves unexplained.
 
-    python experiments/light_benchmark/benchmark.py --tag base        # the shipped, held fit
-    python experiments/light_benchmark/benchmark.py --tag free \
-        --set selfcal.prior_weight=0 selfcal.max_flattening_deg=null        # the lights free
+    python experiments/light_benchmark/benchmark.py --tag base \
+        --set selfcal.frame_held_first=false                   # the held fit, the default until 2026-12-02
+    python experiments/light_benchmark/benchmark.py --tag free --set selfcal.frame_held_first=false \
+        selfcal.prior_weight=0 selfcal.max_flattening_deg=null        # the lights free
     python experiments/light_benchmark/adequacy.py --held base --free free
 
-The self-calibration held near the network's lights (``prior_weight=0.003``, the default) gains
+The self-calibration held near the network's lights (``prior_weight=0.003``) gains
 little; with the lights free it finds DiLiGenT's cat (5.6° → 1.8°) and drifts by tens of degrees
 elsewhere (``subsets.py``, ``starts.py``). The drifts were put down to what the model cannot render
 (spatially varying gloss, interreflections, 8-bit floors): the fit spends light error to absorb

@@ -43,8 +43,9 @@ import benchmark  # noqa: E402
 import runs  # noqa: E402
 import scenes  # noqa: E402
 
-FREE = SelfCalibration(device="cpu", prior_weight=0.0, skip_black=True, censor_black=False)
-HELD = SelfCalibration(device="cpu", censor_black=False)      # as shipped until 2026-11-27
+FREE = SelfCalibration(device="cpu", prior_weight=0.0, skip_black=True, censor_black=False,
+                       frame_held_first=False)
+HELD = SelfCalibration(device="cpu", censor_black=False, frame_held_first=False)   # as shipped until 2026-11-27
 MARGINS = (0.0, 0.02, 0.05)      # n_z margins the outline rule tries
 
 

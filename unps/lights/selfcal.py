@@ -15,12 +15,14 @@ enough for a CPU:
    fit (a value of 0 holds the rendering only below the images' first quantisation level); the
    shadows that the current depth casts from the current lights are rendered, and marched again
    every ``shadows_every`` steps;
-3. the lights are held near the first guess, each as far as the light network was sure of it
-   (:mod:`unps.lights.prior`): they move where the images pin them, and only there. A fit that
-   diverges returns the first guess, and so does one that leaves the lights nearer the view axis
-   than the first guess (:func:`flattening`); one that moved the lights far from it warns. Where
-   the reversal test warned that the first guess may read the surface inside out, no fit is made
-   (:func:`warned_inside_out`).
+3. the lights are fitted first with that frame held (each light moves by its own residual
+   alone, as far as the images pin it); only where that fit is declined are they fitted again
+   with the frame free and held near the first guess instead, each as far as the light network
+   was sure of it (:mod:`unps.lights.prior`, :func:`frame_held_then_pulled`). A fit that
+   diverges is declined, and so is one that leaves the lights nearer the view axis than the
+   first guess (:func:`flattening`); where both are declined the first guess is returned. One
+   that moved the lights far from it warns. Where the reversal test warned that the first guess
+   may read the surface inside out, no fit is made (:func:`warned_inside_out`).
 
 Frame: x right (+col), y up (−row), z toward the camera; orthographic view along +z.
 """
@@ -94,6 +96,7 @@ class SelfCalibration:
             objects under 96, 20 and 12 lights) it took the final lights from 8.02 / 9.84 /
             9.25° to 7.89 / 9.31 / 8.76°, better on each of DiLiGenT's nine cases, with one
             raise above 1° (``experiments/light_benchmark/README.md``, "The frame held first").
+            False: the pulled fit alone (the default until 2026-12-02).
         fit_colour: fit each light's colour (an RGB scale per image, :meth:`SelfCalibrationModel.tints`),
             not only its intensity: the light network's colours can be off by tens of percent
             per channel, and a fit that cannot correct them moves the directions to absorb what
@@ -134,7 +137,7 @@ class SelfCalibration:
     skip_black: bool = False
     censor_black: bool = True
     hold_frame: bool = False
-    frame_held_first: bool = False
+    frame_held_first: bool = True
     fit_colour: bool = True
     lr: float = 0.01
     lr_lights: float = 0.003
@@ -195,7 +198,25 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
         return lights, Verdict(settings.name, "declined", "the reversal test warned that the lights "
                                "may read the surface inside out (light.selfcal.decline_inside_out)")
     if settings.frame_held_first:
-        return frame_held_then_pulled(subject, lights, settings, observe)
+        fitted, verdict = frame_held_then_pulled(subject, lights, settings, observe)
+    else:
+        fitted, verdict = fit_once(subject, lights, settings, observe)
+    if verdict.outcome == "declined":
+        log.warning("self-calibration of %s declined: %s; keeping the lights it started from",
+                    subject.name, verdict.reason)
+    elif verdict.evidence["moved_deg"] > MOVED_WARNING:
+        log.warning("self-calibration moved the lights %.1f° on average from the light network's "
+                    "estimate: the images and the network disagree, and either may be wrong; check "
+                    "lights.png, and calibrate the lights (light=gt) if you can",
+                    verdict.evidence["moved_deg"])
+    return fitted, verdict
+
+
+def fit_once(subject: Subject, lights: Lights, settings: SelfCalibration,
+             observe: Callable[[int, np.ndarray], None] | None = None) -> tuple[Lights, Verdict]:
+    """One fit of the lights as ``settings`` say (``frame_held_first`` aside), from ``lights``;
+    ``lights`` themselves with a declined verdict where it diverged or flattened them more than
+    ``settings.max_flattening_deg`` (:func:`self_calibrate` has checked the subject and settings)."""
     start = time.perf_counter()
     subject = subject.crop_to_mask(1)              # the working grid's crop: the same pixels, less to divide
     observed = with_lights(subject, lights)              # divided by the first guess's intensities
@@ -220,7 +241,6 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
                             None if ceiling is None else ceiling.to(device), observe)
     directions, scales = (t.detach().cpu().numpy().astype(np.float64) for t in model.lights())
     if not (np.isfinite(loss) and np.all(np.isfinite(directions))):
-        log.warning("self-calibration of %s diverged; keeping the first guess", subject.name)
         return lights, Verdict(settings.name, "declined", "the fit diverged",
                                {"loss": loss, "steps": steps})
     moved = float(angular_error(directions, lights.directions).mean())
@@ -234,17 +254,11 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
              subject.n_images, int(grid.mask.sum()), steps, time.perf_counter() - start, loss, pull,
              moved, flattened)
     if settings.max_flattening_deg is not None and flattened > settings.max_flattening_deg:
-        log.warning("self-calibration of %s took the lights %.2f° nearer the view axis than the "
-                    "light network's (more than light.selfcal.max_flattening_deg=%g); keeping the "
-                    "network's lights", subject.name, flattened, settings.max_flattening_deg)
+        limit = f"light.selfcal.max_flattening_deg={settings.max_flattening_deg:g}°"
         return lights, Verdict(settings.name, "declined",
                                f"the fit took the lights {flattened:.2f}° nearer the view axis on average "
-                               f"(more than {settings.max_flattening_deg:g}°), along the bas-relief the "
-                               f"images pin least (directions moved {moved:.2f}°)", evidence)
-    if moved > MOVED_WARNING:
-        log.warning("self-calibration moved the lights %.1f° on average from the light network's "
-                    "estimate: the images and the network disagree, and either may be wrong; check "
-                    "lights.png, and calibrate the lights (light=gt) if you can", moved)
+                               f"(more than {limit}), along the bas-relief the images pin least "
+                               f"(directions moved {moved:.2f}°)", evidence)
     intensities = lights.intensities if lights.intensities is not None else np.ones((len(scales), 3))
     intensities = intensities * scales[:, None] * model.tints().detach().cpu().numpy()
     intensities = intensities / np.exp(np.log(intensities.mean(1)).mean())
@@ -261,13 +275,13 @@ def frame_held_then_pulled(subject: Subject, lights: Lights, settings: SelfCalib
                            ) -> tuple[Lights, Verdict]:
     """``settings.frame_held_first``: the fit with the shared frame held and no pull, kept unless
     declined; where declined, the fit the other settings describe, its verdict saying why."""
-    held = replace(settings, frame_held_first=False, hold_frame=True, prior_weight=0.0)
-    fitted, verdict = self_calibrate(subject, lights, held, observe)
+    held = replace(settings, hold_frame=True, prior_weight=0.0)
+    fitted, verdict = fit_once(subject, lights, held, observe)
     if verdict.outcome != "declined":
         return fitted, replace(verdict, reason=f"with the shared frame held: {verdict.reason}")
     log.info("the fit with the shared frame held was declined (%s); fitting pulled toward the "
              "first guess instead", verdict.reason)
-    fitted, pulled = self_calibrate(subject, lights, replace(settings, frame_held_first=False), observe)
+    fitted, pulled = fit_once(subject, lights, settings, observe)
     evidence = {**pulled.evidence, **{f"frame_held_{k}": v for k, v in verdict.evidence.items()}}
     return fitted, replace(pulled, reason=f"{pulled.reason} (the fit with the shared frame held was "
                                           f"declined: {verdict.reason})", evidence=evidence)
