@@ -197,10 +197,11 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
                     "to render it; keeping them", subject.name)
         return lights, Verdict(settings.name, "declined", "the reversal test warned that the lights "
                                "may read the surface inside out (light.selfcal.decline_inside_out)")
+    images = working_images(subject, lights, settings)
     if settings.frame_held_first:
-        fitted, verdict = frame_held_then_pulled(subject, lights, settings, observe)
+        fitted, verdict = frame_held_then_pulled(images, lights, settings, observe)
     else:
-        fitted, verdict = fit_once(subject, lights, settings, observe)
+        fitted, verdict = fit_once(images, lights, settings, observe)
     if verdict.outcome == "declined":
         log.warning("self-calibration of %s declined: %s; keeping the lights it started from",
                     subject.name, verdict.reason)
@@ -212,29 +213,59 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
     return fitted, verdict
 
 
-def fit_once(subject: Subject, lights: Lights, settings: SelfCalibration,
-             observe: Callable[[int, np.ndarray], None] | None = None) -> tuple[Lights, Verdict]:
-    """One fit of the lights as ``settings`` say (``frame_held_first`` aside), from ``lights``;
-    ``lights`` themselves with a declined verdict where it diverged or flattened them more than
-    ``settings.max_flattening_deg`` (:func:`self_calibrate` has checked the subject and settings)."""
-    start = time.perf_counter()
+@dataclass(frozen=True)
+class WorkingImages:
+    """What every fit of one self-calibration fits to: the images on the working grid, divided by
+    the first guess's intensities and scaled to a 99th percentile of 1.
+
+    Attributes:
+        grid: the subject cropped to its mask and block-averaged (:func:`working_grid`), with the
+            normals the images' low-rank part gives under the first guess.
+        target: (m, n, 3) its object pixels' values.
+        ceiling: (n, 3) the most light a 0 in each image and channel stands for, in the target's
+            units (:func:`black_ceiling`); None with ``censor_black`` off or no first level.
+        weight: (m,) each pixel's share of pixels not black in every image (:func:`lit_share`);
+            None with ``skip_black`` off or no such pixel.
+    """
+
+    grid: Subject
+    target: torch.Tensor
+    ceiling: torch.Tensor | None
+    weight: torch.Tensor | None
+
+
+def working_images(subject: Subject, lights: Lights, settings: SelfCalibration) -> WorkingImages:
+    """The subject's images as the fits see them, from the first guess ``lights``.
+
+    Raises:
+        InputError: every image is black on the object.
+    """
     subject = subject.crop_to_mask(1)              # the working grid's crop: the same pixels, less to divide
     observed = with_lights(subject, lights)              # divided by the first guess's intensities
     gray = observed.images[:, subject.mask].mean(-1).T.astype(np.float64)       # (m, n)
     if not np.any(gray > 0):
         raise InputError(f"self-calibration of {subject.name!r}: every image is black on the "
                          f"object, so the images say nothing about the lights")
-    first_guess = lights.directions.astype(np.float64)
-    grid = working_grid(observed, normals_under(gray, first_guess), settings.max_pixels)
+    grid = working_grid(observed, normals_under(gray, lights.directions.astype(np.float64)),
+                        settings.max_pixels)
     target = torch.as_tensor(grid.images[:, grid.mask]).permute(1, 0, 2).float()  # (m, n, 3)
     white = torch.quantile(target.flatten()[::7], 0.99).clamp_min(1e-12)
-    target = target / white
-    ceiling = black_ceiling(subject, lights, float(white)) if settings.censor_black else None
+    return WorkingImages(grid, target / white,
+                         black_ceiling(subject, lights, float(white)) if settings.censor_black else None,
+                         lit_share(subject, settings.max_pixels) if settings.skip_black else None)
+
+
+def fit_once(images: WorkingImages, lights: Lights, settings: SelfCalibration,
+             observe: Callable[[int, np.ndarray], None] | None = None) -> tuple[Lights, Verdict]:
+    """One fit of the lights as ``settings`` say (``frame_held_first`` aside), from ``lights``;
+    ``lights`` themselves with a declined verdict where it diverged or flattened them more than
+    ``settings.max_flattening_deg`` (:func:`self_calibrate` has checked the subject and settings)."""
+    start = time.perf_counter()
+    grid, target, ceiling, weight = images.grid, images.target, images.ceiling, images.weight
     device = resolve_device(settings.device)
-    model = initial_model(grid, target, first_guess, settings).to(device)
+    model = initial_model(grid, target, lights.directions.astype(np.float64), settings).to(device)
     prior = network_prior(lights, settings.prior_weight, settings.prior_floor_deg,
                           settings.prior_intensity)
-    weight = lit_share(subject, settings.max_pixels) if settings.skip_black else None
     loss, pull, steps = fit(model, target.to(device), settings,
                             None if prior is None else prior.to(device),
                             None if weight is None else weight.to(device),
@@ -251,7 +282,7 @@ def fit_once(subject: Subject, lights: Lights, settings: SelfCalibration,
         evidence["black_share"] = float(1 - weight.mean())
     log.info("self-calibrated %d lights on %d pixels in %d steps (%.1f s): loss %.4g, pull toward "
              "the first guess %.4g; directions moved %.2f° on average, %+.2f° nearer the view axis",
-             subject.n_images, int(grid.mask.sum()), steps, time.perf_counter() - start, loss, pull,
+             grid.n_images, int(grid.mask.sum()), steps, time.perf_counter() - start, loss, pull,
              moved, flattened)
     if settings.max_flattening_deg is not None and flattened > settings.max_flattening_deg:
         limit = f"light.selfcal.max_flattening_deg={settings.max_flattening_deg:g}°"
@@ -270,18 +301,18 @@ def fit_once(subject: Subject, lights: Lights, settings: SelfCalibration,
                            f"on average", evidence)
 
 
-def frame_held_then_pulled(subject: Subject, lights: Lights, settings: SelfCalibration,
+def frame_held_then_pulled(images: WorkingImages, lights: Lights, settings: SelfCalibration,
                            observe: Callable[[int, np.ndarray], None] | None = None
                            ) -> tuple[Lights, Verdict]:
     """``settings.frame_held_first``: the fit with the shared frame held and no pull, kept unless
     declined; where declined, the fit the other settings describe, its verdict saying why."""
     held = replace(settings, hold_frame=True, prior_weight=0.0)
-    fitted, verdict = fit_once(subject, lights, held, observe)
+    fitted, verdict = fit_once(images, lights, held, observe)
     if verdict.outcome != "declined":
         return fitted, replace(verdict, reason=f"with the shared frame held: {verdict.reason}")
     log.info("the fit with the shared frame held was declined (%s); fitting pulled toward the "
              "first guess instead", verdict.reason)
-    fitted, pulled = fit_once(subject, lights, settings, observe)
+    fitted, pulled = fit_once(images, lights, settings, observe)
     evidence = {**pulled.evidence, **{f"frame_held_{k}": v for k, v in verdict.evidence.items()}}
     return fitted, replace(pulled, reason=f"{pulled.reason} (the fit with the shared frame held was "
                                           f"declined: {verdict.reason})", evidence=evidence)
