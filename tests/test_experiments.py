@@ -309,9 +309,19 @@ def test_light_benchmark_normals_reads_finished_rows_refuses_mixed_settings_and_
         tmp_path):
     normals = load_script("lb_normals", "experiments/light_benchmark/normals.py")
     obj = normals.scenes.OBJECTS[0]
-    (tmp_path / f"{obj.name}-rpca").mkdir()
-    (tmp_path / f"{obj.name}-rpca" / "metrics.json").write_text(json.dumps({"normal_mae": 4.5}))
+    run = tmp_path / f"{obj.name}-rpca"
+    (run / ".hydra").mkdir(parents=True)
+    (run / "metrics.json").write_text(json.dumps({"normal_mae": 4.5}))
+    overrides = ["subject=folder", f"subject.root={tmp_path / 'nowhere'}", f"subject.name={obj.name}",
+                 f"subject.quantization={normals.scenes.quantization(obj.storage)}", "light=gt", "method=rpca"]
+    made = normals.fit_settings(overrides)
+    assert made["method"]["name"] == "rpca" and made["seed"] == 0 and "threads" not in made
+    (run / ".hydra" / "config.yaml").write_text(json.dumps({**made, "threads": 1, "paths": {}}))
     assert normals.run_row(tmp_path / "nowhere", obj, "rpca", "gt", [], tmp_path)["normal_mae"] == 4.5
+    assert normals.stale_run(run, made) is None
+    assert normals.stale_run(run, normals.fit_settings([*overrides, "seed=1", "preset.steps=300"])) == (
+        "made with other settings (preset.steps: 1000 → 300; seed: 0 → 1)")
+    assert normals.stale_run(tmp_path, made) == "no record of the settings it was made with"
     lines = normals.storage_means(["png16", "floor8", "png16"], {"rpca": [1.0, 5.0, 2.0], "unps": [3.0, 4.0, 1.0]})
     assert [line.split() for line in lines] == [
         ["mean,", "png16", "(2)", "1.50°", "2.00°"], ["mean,", "floor8", "(1)", "5.00°", "4.00°"]]
@@ -326,6 +336,19 @@ def test_light_benchmark_normals_reads_finished_rows_refuses_mixed_settings_and_
         normals.runs.claim(tmp_path, normals.made_with("selfcal", ["preset.prior_weight=0"]))
     assert normals.run_folder(tmp_path, "default", "96") == tmp_path / "normals" / "default"
     assert normals.run_folder(tmp_path, "default", "12") == tmp_path / "normals" / "default-12"
+
+
+def test_light_benchmark_rows_record_their_resolved_light_settings_and_stale_rows_say_why():
+    """A row kept by the light benchmark can stand for a rerun only where every light setting,
+    the defaults resolved, is the same: a default that changed since makes the row again."""
+    benchmark = load_script("lb_benchmark", "experiments/light_benchmark/benchmark.py")
+    made = benchmark.light_settings(None, ["selfcal.steps=500"])
+    assert made["selfcal"]["steps"] == 500 and made["stages"] == ["reversal", "selfcal"]
+    assert made["selfcal"]["device"] == "auto"          # ${device} resolved
+    assert benchmark.stale({"stages": [], "light": made}, made) is None
+    assert benchmark.stale({"stages": []}, made) == "made before rows recorded their light settings"
+    now = benchmark.light_settings(None, [])
+    assert benchmark.stale({"light": made}, now) == "made with other light settings (selfcal.steps: 500 → 1000)"
 
 
 def test_light_benchmark_builds_and_runs_the_light_source_as_the_fit_does():

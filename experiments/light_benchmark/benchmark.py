@@ -27,8 +27,10 @@ Each case runs ``light=estimated`` as ``python -m unps.fit`` does (the network, 
 of ``--stages``, default those of ``light=selfcal``; ``--set`` overrides their settings as on the
 command line) and prints, per stage, the direction error and intensity error of the lights after
 it, flagging a stage that raised the direction error by more than 1° (``+``) or 2° (``++``).
-Results are kept case by case in ``--out`` (a run is resumed by rerunning the command); the
-summary compares, per light count, the final lights with the network's.
+Results are kept case by case in ``--out`` (a run is resumed by rerunning the command), each
+row with every light setting it was made with, the defaults resolved: a row made with other
+settings (a default changed since) is made again, and says so. The summary compares, per light
+count, the final lights with the network's.
 """
 
 from __future__ import annotations
@@ -177,22 +179,49 @@ def instantiate_node(config: list[str], overrides: list[str], key: str):
     return instantiate(OmegaConf.to_container(node, resolve=True), _partial_=True)
 
 
-def light_source(stages: list[str] | None, settings: list[str]):
-    """``light=selfcal``'s light source as ``python -m unps.fit`` builds it
-    (:func:`unps.pipeline.run.build`), with these stages and ``light.<key>=<value>`` overrides;
-    and the names of its stages."""
+def light_node(stages: list[str] | None, settings: list[str]):
+    """The ``light`` node of ``python -m unps.fit light=selfcal`` with these stages and
+    ``light.<key>=<value>`` overrides (a DictConfig)."""
     overrides = ["light=selfcal", *(f"light.{s}" for s in settings)]
     if stages is not None:
         overrides.append(f"light.stages=[{','.join(stages)}]")
     from hydra import compose, initialize_config_module
+
+    with initialize_config_module("unps.conf", version_base=None):
+        return compose("fit", overrides=overrides).light
+
+
+def light_source(stages: list[str] | None, settings: list[str]):
+    """``light=selfcal``'s light source as ``python -m unps.fit`` builds it
+    (:func:`unps.pipeline.run.build`), with these stages and ``light.<key>=<value>`` overrides
+    (:func:`light_node`); and the names of its stages."""
     from omegaconf import OmegaConf
 
     from unps.pipeline.run import build
 
-    with initialize_config_module("unps.conf", version_base=None):
-        node = compose("fit", overrides=overrides).light
+    node = light_node(stages, settings)
     _, source = build(node)
     return source, OmegaConf.to_container(node.stages)
+
+
+def light_settings(stages: list[str] | None, settings: list[str]) -> dict:
+    """Every setting of the light source :func:`light_source` builds, the defaults resolved: what
+    each case's row records it was made with."""
+    from omegaconf import OmegaConf
+
+    return OmegaConf.to_container(light_node(stages, settings), resolve=True)
+
+
+def stale(result: dict, made_with: dict) -> str | None:
+    """Why a kept row ``result`` cannot stand for a run with the light settings ``made_with``
+    (:func:`light_settings`) — the settings that differ, or its having been made before rows
+    recorded them — or None where it can."""
+    if "light" not in result:
+        return "made before rows recorded their light settings"
+    changed = runs.differences(result["light"], made_with)
+    if not changed:
+        return None
+    return f"made with other light settings ({'; '.join(changed[:3])}{'; …' if len(changed) > 3 else ''})"
 
 
 def weights_used(settings: list[str]) -> str:
@@ -309,6 +338,7 @@ def main():
     from hydra.errors import ConfigCompositionException
     try:
         source, stage_names = light_source(args.stages, args.settings)
+        made_with = light_settings(args.stages, args.settings)
     except (InputError, ConfigCompositionException) as e:
         parser.error(str(e))
     out = args.out or args.cache / "results" / args.tag
@@ -324,15 +354,17 @@ def main():
     results = {}
     for group, name, label, read in cases(args.only, args.sets, args.data, args.cache, args.names):
         path = out / f"{group}-{name}-{label}.json"
-        if path.is_file():
-            result = json.loads(path.read_text())
-        else:
+        result = json.loads(path.read_text()) if path.is_file() else None
+        why = None if result is None else stale(result, made_with)
+        if why:
+            print(f"{group:<9} {name:<12} {label:>3} run again: its row was {why}")
+        if result is None or why:
             try:
                 subject = read()
             except InputError as e:
                 print(f"{group:<9} {name:<12} {label:>3} skipped: {e}")
                 continue
-            result = run_case(source, subject)
+            result = {**run_case(source, subject), "light": made_with}
             path.write_text(json.dumps(result, indent=1))
         results[group, name, label] = result
         print(row(group, name, label, result, stage_names), flush=True)

@@ -49,6 +49,42 @@ def claim(out: Path, made_with, way_out: str = "give another --tag or --out") ->
     recorded.write_text(json.dumps(made_with) + "\n")
 
 
+def differences(before, now, where: str = "") -> list[str]:
+    """Where two JSON values differ, one ``key.path: before → now`` per differing leaf, ``(none)``
+    for a key only one of them has; [] where they are equal.
+
+    A cached row records the settings it was made with, resolved (the defaults included), so
+    that a rerun after a default changed makes that row again instead of printing the old one.
+
+    >>> differences({"selfcal": {"steps": 1000, "hold_frame": False}},
+    ...             {"selfcal": {"steps": 500, "hold_frame": False}})
+    ['selfcal.steps: 1000 → 500']
+    >>> differences(None, {"steps": 1})
+    ['(none) → {"steps": 1}']
+    """
+    if before == now:
+        return []
+    if isinstance(before, dict) and isinstance(now, dict):
+        found = []
+        for key in sorted(set(before) | set(now), key=str):
+            inner = f"{where}.{key}" if where else str(key)
+            if key not in before or key not in now:
+                found.append(f"{inner}: {_shown(before, key)} → {_shown(now, key)}")
+            else:
+                found += differences(before[key], now[key], inner)
+        return found
+    return [f"{where + ': ' if where else ''}{_plain(before)} → {_plain(now)}"]
+
+
+def _shown(values: dict, key) -> str:
+    return _plain(values[key]) if key in values else "(none)"
+
+
+def _plain(value) -> str:
+    return "(none)" if value is None else json.dumps(value) if isinstance(value, (dict, list, str)) \
+        else str(value)
+
+
 @contextmanager
 def held(run_dir: Path) -> Iterator[None]:
     """Mark ``run_dir`` as being run by this process for the length of the block (a file
