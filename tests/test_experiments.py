@@ -667,17 +667,24 @@ def test_light_moves_splits_off_a_common_linear_map_of_the_scaled_lights(tmp_pat
     assert printed[1].startswith("ball") and printed[1].split()[5] == "0.00°"   # the linear map alone: exact
 
 
-def test_selfcal_steps_reads_each_mark_off_the_trace_and_counts_raises(capsys):
+def test_selfcal_steps_reads_the_final_lights_off_both_fits_as_the_default_decides(capsys):
+    """The held fit where it flattens the lights no more than the limit at the stop; the pulled fit
+    where it does; the start where both do."""
     study = load_script("lb_selfcal_steps", "experiments/light_benchmark/selfcal_steps.py")
-    steady = {"network": 10.0, "start": 8.0, "trace": [[0, 8.0], [100, 7.0], [200, 6.0], [250, 6.0]]}
-    drifting = {"network": 6.0, "start": 5.0, "trace": [[0, 5.0], [100, 5.5], [200, 7.5], [250, 6.5]]}
-    assert study.error_at(drifting, 200) == 7.5 and study.error_at(drifting, 250) == 6.5
-    lines = study.summary(["steady", "drifting"], [steady, drifting], [100, 200, 250]).splitlines()
-    assert lines[0].split()[:5] == ["step", "100:", "6.25°", "ratio", "0.781"]
-    assert "raised >1°:  0" in lines[0] and "vs the last step: 1 above, 1 below" in lines[0]
-    assert "raised >1°:  1  >2°:  1  worst +2.50° (drifting)" in lines[1]      # 7.5° from a start of 5°
-    assert "vs the last step: 1 above, 0 below" in lines[1]
-    assert "worst +1.50° (drifting)" in lines[2] and "0 above, 0 below" in lines[2]
+    held_kept = {"network": 10.0, "start": 8.0, "max_flattening_deg": 1.0, "pulled": None,
+                 "held": {"trace": [[0, 8.0, 0.0], [100, 7.0, 0.2], [200, 6.0, 0.5], [250, 6.0, 0.6]]}}
+    pulled_late = {"network": 6.0, "start": 5.0, "max_flattening_deg": 1.0,       # the held fit flattens at 200
+                   "held": {"trace": [[0, 5.0, 0.0], [100, 4.5, 0.5], [200, 7.5, 1.5], [250, 7.0, 1.8]]},
+                   "pulled": {"trace": [[0, 5.0, 0.0], [100, 5.5, 0.1], [200, 5.8, 0.2], [250, 6.5, 1.2]]}}
+    assert study.final(held_kept, lambda fit: 200) == (6.0, 200)
+    assert study.final(pulled_late, lambda fit: 100) == (4.5, 100)          # held kept at 100
+    assert study.final(pulled_late, lambda fit: 200) == (5.8, 400)          # held declined, pulled kept
+    assert study.final(pulled_late, lambda fit: 250) == (5.0, 500)          # both declined: the start
+    names, cases = ["held_kept", "pulled_late"], [held_kept, pulled_late]
+    line = study.summary_line("step 200", cases, names, lambda fit: 200)
+    assert line.split()[:7] == ["step", "200", "5.90°", "ratio", "0.738", "steps", "300"]
+    assert "raised >1°:  0" in line and "worst +0.80° (pulled_late)" in line
+    assert "vs the full length: 1 above, 0 below" in line                    # 5.8° against the start's 5.0°
     with pytest.raises(SystemExit):
         study.main(["--steps", "300", "--marks", "250", "400"])
     assert "--marks [250, 400]: each must be a multiple of 100 up to --steps (300)" in capsys.readouterr().err
@@ -690,17 +697,19 @@ def test_selfcal_steps_stops_each_trace_where_its_lights_settle():
         t = np.radians(degrees)
         return [[np.sin(t), 0.0, np.cos(t)], [np.sin(t + 0.5), 0.0, np.cos(t + 0.5)]]
 
-    settling = {"network": 6.0, "start": 5.0, "trace": [[0, 5.0], [100, 4.0], [200, 3.5], [300, 3.4]],
+    settling = {"trace": [[0, 5.0, 0], [100, 4.0, 0], [200, 3.5, 0], [300, 3.4, 0]],
                 "directions": [turned(0), turned(5), turned(5.5), turned(5.51)]}
-    moving = {"network": 6.0, "start": 5.0, "trace": [[0, 5.0], [100, 4.0], [200, 6.5], [300, 7.0]],
+    moving = {"trace": [[0, 5.0, 0], [100, 4.0, 0], [200, 6.5, 0], [300, 7.0, 0]],
               "directions": [turned(0), turned(5), turned(10), turned(10.01)]}
     assert study.settled_step(settling, 1.0) == 200        # 0.5° from step 100 to 200
     assert study.settled_step(settling, 0.1) == 300        # the last read: the fit ends there anyway
+    assert study.settled_step(settling, 0) == 300          # 0: every step
     assert study.settled_step(moving, 1.0) == 300
-    lines = study.settled_summary(["settling", "moving"], [settling, moving], [1.0, 0.1]).splitlines()
-    assert lines[0].split()[:6] == ["settle", "1°:", "5.25°", "ratio", "0.875", "steps"]
-    assert "steps    250" in lines[0] and "raised >1°:  1" in lines[0] and "worst +2.00° (moving)" in lines[0]
-    assert "0 above, 0 below, worst +0.10°" in lines[0] and "steps    300" in lines[1]
+    cases = [{"network": 6.0, "start": 5.0, "max_flattening_deg": 1.0, "held": fit, "pulled": None}
+             for fit in (settling, moving)]
+    line = study.summary_line("settle 1°", cases, ["settling", "moving"], lambda fit: study.settled_step(fit, 1.0))
+    assert line.split()[:7] == ["settle", "1°", "5.25°", "ratio", "0.875", "steps", "250"]
+    assert "raised >1°:  1" in line and "worst +2.00° (moving)" in line and "0 above, 0 below" in line
 
 
 def test_outline_ring_splits_the_error_by_distance_to_the_outline(tmp_path, capsys):
