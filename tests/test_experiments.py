@@ -671,15 +671,17 @@ def test_selfcal_steps_reads_the_final_lights_off_both_fits_as_the_default_decid
     """The held fit where it flattens the lights no more than the limit at the stop; the pulled fit
     where it does; the start where both do."""
     study = load_script("lb_selfcal_steps", "experiments/light_benchmark/selfcal_steps.py")
-    held_kept = {"network": 10.0, "start": 8.0, "max_flattening_deg": 1.0, "pulled": None,
+    held_kept = {"network": 10.0, "start": 8.0, "max_flattening_deg": 1.0, "inside_out": False, "pulled": None,
                  "held": {"trace": [[0, 8.0, 0.0], [100, 7.0, 0.2], [200, 6.0, 0.5], [250, 6.0, 0.6]]}}
-    pulled_late = {"network": 6.0, "start": 5.0, "max_flattening_deg": 1.0,       # the held fit flattens at 200
+    pulled_late = {"network": 6.0, "start": 5.0, "max_flattening_deg": 1.0, "inside_out": False,  # flattens at 200
                    "held": {"trace": [[0, 5.0, 0.0], [100, 4.5, 0.5], [200, 7.5, 1.5], [250, 7.0, 1.8]]},
                    "pulled": {"trace": [[0, 5.0, 0.0], [100, 5.5, 0.1], [200, 5.8, 0.2], [250, 6.5, 1.2]]}}
     assert study.final(held_kept, lambda fit: 200) == (6.0, 200)
     assert study.final(pulled_late, lambda fit: 100) == (4.5, 100)          # held kept at 100
     assert study.final(pulled_late, lambda fit: 200) == (5.8, 400)          # held declined, pulled kept
     assert study.final(pulled_late, lambda fit: 250) == (5.0, 500)          # both declined: the start
+    assert study.final({**pulled_late, "inside_out": True, "held": None, "pulled": None},
+                       lambda fit: 200) == (5.0, 0)                          # no fit at all
     names, cases = ["held_kept", "pulled_late"], [held_kept, pulled_late]
     line = study.summary_line("step 200", cases, names, lambda fit: 200)
     assert line.split()[:7] == ["step", "200", "5.90°", "ratio", "0.738", "steps", "300"]
@@ -705,7 +707,8 @@ def test_selfcal_steps_stops_each_trace_where_its_lights_settle():
     assert study.settled_step(settling, 0.1) == 300        # the last read: the fit ends there anyway
     assert study.settled_step(settling, 0) == 300          # 0: every step
     assert study.settled_step(moving, 1.0) == 300
-    cases = [{"network": 6.0, "start": 5.0, "max_flattening_deg": 1.0, "held": fit, "pulled": None}
+    cases = [{"network": 6.0, "start": 5.0, "max_flattening_deg": 1.0, "inside_out": False, "held": fit,
+              "pulled": None}
              for fit in (settling, moving)]
     line = study.summary_line("settle 1°", cases, ["settling", "moving"], lambda fit: study.settled_step(fit, 1.0))
     assert line.split()[:7] == ["settle", "1°", "5.25°", "ratio", "0.875", "steps", "250"]

@@ -10,7 +10,8 @@ the default self-calibration fits (:func:`unps.lights.selfcal.frame_held_then_pu
 for ``--steps`` steps without stopping early, the lights' direction error and
 :func:`unps.lights.selfcal.flattening` read every 100 steps (``observe``): first the fit with the
 shared frame held; then, where it flattened the lights by more than
-``light.selfcal.max_flattening_deg`` at any read, the pulled fit that would take over. One json per
+``light.selfcal.max_flattening_deg`` at any read, the pulled fit that would take over (neither
+where the reversal test warned that the reading may be inside out, as by default). One json per
 case in ``<cache>/results/selfcal_steps-<steps>/`` (a rerun resumes). A fit is deterministic and
 its steps do not depend on how many there will be (a constant learning rate, the shadows marched
 every 100 steps), so a read at step S is what ``light.selfcal.steps=S`` gives, and a stop rule can
@@ -33,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from unps.lights.selfcal import fit_once, flattening, working_images
+from unps.lights.selfcal import fit_once, flattening, warned_inside_out, working_images
 from unps.metrics import angular_error
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -64,17 +65,20 @@ def trace_fit(images, start, settings, truth: np.ndarray) -> dict:
 def trace_case(subject, network, settings) -> dict:
     """The network's and the start's (after the reversal test) direction errors, the held fit's
     trace (:func:`trace_fit`), and the pulled fit's where the held one flattened the lights by more
-    than ``settings.max_flattening_deg`` at some read (else None)."""
+    than ``settings.max_flattening_deg`` at some read (else None); no fit where the default makes
+    none (``inside_out``: the reversal test warned, :func:`unps.lights.selfcal.warned_inside_out`)."""
     start = network(subject)
     truth = subject.light_directions.astype(np.float64)
+    limit = settings.max_flattening_deg
+    case = {"network": start.verdicts[0].errors["light_dir_mae"],
+            "start": float(angular_error(start.directions.astype(np.float64), truth).mean()),
+            "max_flattening_deg": limit, "inside_out": False, "held": None, "pulled": None}
+    if settings.decline_inside_out and warned_inside_out(start):
+        return {**case, "inside_out": True}
     images = working_images(subject, start, settings)
     held = trace_fit(images, start, replace(settings, hold_frame=True, prior_weight=0.0), truth)
-    limit = settings.max_flattening_deg
     flattened = limit is not None and max(f for _, _, f in held["trace"]) > limit
-    return {"network": start.verdicts[0].errors["light_dir_mae"],
-            "start": float(angular_error(start.directions.astype(np.float64), truth).mean()),
-            "max_flattening_deg": limit, "held": held,
-            "pulled": trace_fit(images, start, settings, truth) if flattened else None}
+    return {**case, "held": held, "pulled": trace_fit(images, start, settings, truth) if flattened else None}
 
 
 def settled_step(fit: dict, settle_deg: float) -> int:
@@ -93,8 +97,11 @@ def settled_step(fit: dict, settle_deg: float) -> int:
 def final(case: dict, stop) -> tuple[float, int]:
     """The final lights' direction error and the steps of both fits together, each fit stopped at
     ``stop(fit)``: the held fit's lights unless they are flattened by more than the limit there,
-    else the pulled fit's under the same rule, else the start's."""
+    else the pulled fit's under the same rule, else the start's (and the start's, without a fit,
+    where the reversal test warned that the start may be inside out)."""
     steps = 0
+    if case["inside_out"]:
+        return case["start"], steps
     for fit in (case["held"], case["pulled"]):
         if fit is None:       # the held fit flattened nowhere, so it was kept
             break
@@ -151,9 +158,9 @@ def main(argv=None) -> None:
     def progress(case, result, _) -> str:
         group, name, label = case
         marks = "  ".join(f"{m}: {final(result, lambda fit, m=m: m)[0]:6.2f}°" for m in args.marks)
-        pulled = "  pulled" if result["pulled"] is not None else ""
+        note = "  inside out" if result["inside_out"] else "  pulled" if result["pulled"] is not None else ""
         return (f"{group:<10}{name:<12}{label:>4}  network {result['network']:6.2f}°  start "
-                f"{result['start']:6.2f}°  {marks}{pulled}")
+                f"{result['start']:6.2f}°  {marks}{note}")
 
     rows = runs.summaries(benchmark.study_cases(args), out,
                           lambda subject: trace_case(subject, network, settings),
