@@ -280,14 +280,15 @@ def test_experiment_scripts_import(script):
 def test_nir_benchmark_reads_one_row_per_seed_and_averages(tmp_path):
     """Finished rows are read, not refitted: seed 0 in <row>/, seed k in <row>-seed<k>/."""
     benchmark = load_script("nir_benchmark", "experiments/neural_inverse_rendering/benchmark.py")
-    for folder, mae in [("ball-gt-unps-fast", 2.0), ("ball-gt-unps-fast-seed3", 3.0)]:
-        (tmp_path / folder).mkdir()
+    for folder, mae, seed in [("ball-gt-unps-fast", 2.0, 0), ("ball-gt-unps-fast-seed3", 3.0, 3)]:
+        (tmp_path / folder / ".hydra").mkdir(parents=True)
         (tmp_path / folder / "metrics.json").write_text(json.dumps({"normal_mae": mae}))
+        made = benchmark.runs.fit_settings(["subject=ball", f"seed={seed}"])   # as Hydra records it
+        (tmp_path / folder / ".hydra" / "config.yaml").write_text(json.dumps(made))
     fits = benchmark.unps_rows(tmp_path, "ball-gt-unps-fast", ["subject=ball"], [0, 3])
     assert [f["normal_mae"] for f in fits] == [2.0, 3.0]
     assert benchmark.mae(fits) == "2.50 (2.00 / 3.00)"
     assert benchmark.mae(fits[:1]) == "2.00"
-    (tmp_path / "ball-gt-unps-fast" / ".hydra").mkdir()
     (tmp_path / "ball-gt-unps-fast" / ".hydra" / "overrides.yaml").write_text("- subject=ball\n- seed=0\n")
     assert benchmark.unps_rows(tmp_path, "ball-gt-unps-fast", ["subject=ball"], [0])[0]["normal_mae"] == 2.0
     with pytest.raises(ValueError, match=r"lacks \['preset.input_noise_var=0.3'\] and has \[\]"):
@@ -314,14 +315,14 @@ def test_light_benchmark_normals_reads_finished_rows_refuses_mixed_settings_and_
     (run / "metrics.json").write_text(json.dumps({"normal_mae": 4.5}))
     overrides = ["subject=folder", f"subject.root={tmp_path / 'nowhere'}", f"subject.name={obj.name}",
                  f"subject.quantization={normals.scenes.quantization(obj.storage)}", "light=gt", "method=rpca"]
-    made = normals.fit_settings(overrides)
+    made = normals.runs.fit_settings(overrides)
     assert made["method"]["name"] == "rpca" and made["seed"] == 0 and "threads" not in made
     (run / ".hydra" / "config.yaml").write_text(json.dumps({**made, "threads": 1, "paths": {}}))
     assert normals.run_row(tmp_path / "nowhere", obj, "rpca", "gt", [], tmp_path)["normal_mae"] == 4.5
-    assert normals.stale_run(run, made) is None
-    assert normals.stale_run(run, normals.fit_settings([*overrides, "seed=1", "preset.steps=300"])) == (
+    assert normals.runs.stale_run(run, made) is None
+    assert normals.runs.stale_run(run, normals.runs.fit_settings([*overrides, "seed=1", "preset.steps=300"])) == (
         "made with other settings (preset.steps: 1000 → 300; seed: 0 → 1)")
-    assert normals.stale_run(tmp_path, made) == "no record of the settings it was made with"
+    assert normals.runs.stale_run(tmp_path, made) == "no record of the settings it was made with"
     lines = normals.storage_means(["png16", "floor8", "png16"], {"rpca": [1.0, 5.0, 2.0], "unps": [3.0, 4.0, 1.0]})
     assert [line.split() for line in lines] == [
         ["mean,", "png16", "(2)", "1.50°", "2.00°"], ["mean,", "floor8", "(1)", "5.00°", "4.00°"]]

@@ -53,20 +53,17 @@ METHODS = ("woodham", "rpca", "unps")
 LIGHTS = ("gt", "estimated", "selfcal", "refine")
 
 
-FIT_SETTINGS = ("method", "light", "preset", "interreflection", "seed", "noise", "device")
-
-
 def run_row(folder: Path, obj: scenes.BenchmarkObject, method: str, light: str,
             settings: list[str], out: Path) -> dict:
     """One ``python -m unps.fit`` run (skipped when its metrics.json exists and its run was made
-    with the settings this one would be, :func:`stale_run`; refused while another process runs it,
+    with the settings this one would be, :func:`runs.stale_run`; refused while another process runs it,
     :func:`runs.held`); its metrics."""
     run_dir = out / f"{obj.name}-{method}"
     metrics = run_dir / "metrics.json"
     overrides = ["subject=folder", f"subject.root={folder}", f"subject.name={obj.name}",
                  f"subject.quantization={scenes.quantization(obj.storage)}", f"light={light}",
                  f"method={method}", *(settings if method == "unps" else [])]
-    why = stale_run(run_dir, fit_settings(overrides)) if metrics.is_file() else None
+    why = runs.stale_run(run_dir, runs.fit_settings(overrides)) if metrics.is_file() else None
     if why:
         print(f"  {obj.name} {method}: run again, {why}", flush=True)
     if why or not metrics.is_file():
@@ -82,34 +79,6 @@ def run_row(folder: Path, obj: scenes.BenchmarkObject, method: str, light: str,
         if done.returncode != 0:
             sys.exit(f"{' '.join(command)} failed:\n{done.stderr[-2000:]}")
     return json.loads(metrics.read_text())
-
-
-def fit_settings(overrides: list[str]) -> dict:
-    """The settings of ``python -m unps.fit <overrides>`` that make its results
-    (:data:`FIT_SETTINGS`: not the subject's paths, the threads or the output folders), as its run
-    folder's ``.hydra/config.yaml`` records them."""
-    from hydra import compose, initialize_config_module
-    from omegaconf import OmegaConf
-
-    with initialize_config_module("unps.conf", version_base=None):
-        config = OmegaConf.to_container(compose("fit", overrides=overrides))
-    return {key: config.get(key) for key in FIT_SETTINGS}
-
-
-def stale_run(run_dir: Path, expected: dict) -> str | None:
-    """Why the run kept in ``run_dir`` cannot stand for a run with the settings ``expected``
-    (:func:`fit_settings`): the settings that differ (a default changed since it ran), or no
-    record of them; None where it can."""
-    from omegaconf import OmegaConf
-
-    recorded = run_dir / ".hydra" / "config.yaml"
-    if not recorded.is_file():
-        return "no record of the settings it was made with"
-    config = OmegaConf.to_container(OmegaConf.load(recorded))
-    changed = runs.differences({key: config.get(key) for key in FIT_SETTINGS}, expected)
-    if not changed:
-        return None
-    return f"made with other settings ({'; '.join(changed[:3])}{'; …' if len(changed) > 3 else ''})"
 
 
 def made_with(light: str, settings: list[str]) -> list[str]:

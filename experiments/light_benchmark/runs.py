@@ -10,6 +10,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 MARK = "running.pid"
+FIT_SETTINGS = ("method", "light", "preset", "interreflection", "seed", "noise", "device")
 
 
 def weights_digest(checkpoint: str | None) -> str:
@@ -152,3 +153,31 @@ def by_light_set(rows: dict):
     name, label)), groups in name order, light sets from the most lights down."""
     for group, label in sorted({(k[0], k[2]) for k in rows}, key=lambda k: (k[0], -int(k[1]))):
         yield group, label, [s for k, s in rows.items() if k[0] == group and k[2] == label]
+
+
+def fit_settings(overrides: list[str]) -> dict:
+    """The settings of ``python -m unps.fit <overrides>`` that make its results
+    (:data:`FIT_SETTINGS`: not the subject's paths, the threads or the output folders), as its run
+    folder's ``.hydra/config.yaml`` records them."""
+    from hydra import compose, initialize_config_module
+    from omegaconf import OmegaConf
+
+    with initialize_config_module("unps.conf", version_base=None):
+        config = OmegaConf.to_container(compose("fit", overrides=overrides))
+    return {key: config.get(key) for key in FIT_SETTINGS}
+
+
+def stale_run(run_dir: Path, expected: dict) -> str | None:
+    """Why the run kept in ``run_dir`` cannot stand for a run with the settings ``expected``
+    (:func:`fit_settings`): the settings that differ (a default changed since it ran), or no
+    record of them; None where it can."""
+    from omegaconf import OmegaConf
+
+    recorded = run_dir / ".hydra" / "config.yaml"
+    if not recorded.is_file():
+        return "no record of the settings it was made with"
+    config = OmegaConf.to_container(OmegaConf.load(recorded))
+    changed = differences({key: config.get(key) for key in FIT_SETTINGS}, expected)
+    if not changed:
+        return None
+    return f"made with other settings ({'; '.join(changed[:3])}{'; …' if len(changed) > 3 else ''})"

@@ -38,6 +38,9 @@ from omegaconf import OmegaConf
 
 from unps.paper import PAPER_MAE
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "light_benchmark"))
+import runs  # noqa: E402
+
 DILIGENT = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "DiLiGenT"
 OBJECTS = ("ball", "cat", "pot1")
 PAPER = PAPER_MAE["estimated"]                          # the paper's uncalibrated MAE (°)
@@ -50,7 +53,8 @@ def run(out: Path, *overrides: str) -> dict:
     """One `unps.fit` in a fresh process; its metrics.json plus ``peak_rss_gb``.
 
     A finished row is read, not refitted, and a killed one resumed, only if Hydra recorded it with
-    these overrides.
+    these overrides; a finished row made with other settings than these overrides give now (a
+    default changed since, :func:`runs.stale_run`) is made again, and says so.
     """
     metrics = out / "metrics.json"
     recorded = out / ".hydra" / "overrides.yaml"
@@ -59,6 +63,10 @@ def run(out: Path, *overrides: str) -> dict:
         if done_with != wanted:
             raise ValueError(f"{out} was run with other overrides: it lacks {sorted(wanted - done_with)} "
                              f"and has {sorted(done_with - wanted)}; give this setting its own --out")
+    why = runs.stale_run(out, runs.fit_settings(list(overrides))) if metrics.is_file() else None
+    if why:
+        print(f"  {out.name}: run again, {why}", flush=True)
+        metrics.unlink()
     if not metrics.is_file():
         code = ("import atexit, json, resource, sys, runpy\n"
                 f"atexit.register(lambda: open({str(out / 'peak_rss_kb')!r}, 'w').write("

@@ -67,7 +67,7 @@ class SelfCalibration:
         settle_deg: stop before ``steps`` once the lights' directions have moved no more than
             this (degrees, on average over the lights) in the last :data:`CHECK_EVERY` steps; 0:
             always run every step. 0.1 (0.05 until 2026-12-03): on the light benchmark the final
-            lights are those of 0.05 to 0.02° in each group's mean, with 6 % fewer steps there and
+            lights are those of 0.05 to 0.02° in each group's mean, with 4 % fewer steps there and
             14–29 % fewer on DiLiGenT's three (``experiments/light_benchmark/README.md``, "How
             many steps the two fits need").
         max_pixels: object pixels on the working grid at most (blocks are averaged).
