@@ -221,7 +221,7 @@ def stale(result: dict, made_with: dict) -> str | None:
     changed = runs.differences(result["light"], made_with)
     if not changed:
         return None
-    return f"made with other light settings ({'; '.join(changed[:3])}{'; …' if len(changed) > 3 else ''})"
+    return f"made with other light settings ({runs.listed(changed)})"
 
 
 def weights_used(settings: list[str]) -> str:

@@ -77,6 +77,15 @@ def differences(before, now, where: str = "") -> list[str]:
     return [f"{where + ': ' if where else ''}{_plain(before)} → {_plain(now)}"]
 
 
+def listed(changed: list[str], most: int = 3) -> str:
+    """The first ``most`` of :func:`differences`' lines, joined, with ``…`` where there are more.
+
+    >>> listed(["a: 1 → 2", "b: 3 → 4"], most=1)
+    'a: 1 → 2; …'
+    """
+    return "; ".join(changed[:most]) + ("; …" if len(changed) > most else "")
+
+
 def _shown(values: dict, key) -> str:
     return _plain(values[key]) if key in values else "(none)"
 
@@ -180,4 +189,4 @@ def stale_run(run_dir: Path, expected: dict) -> str | None:
     changed = differences({key: config.get(key) for key in FIT_SETTINGS}, expected)
     if not changed:
         return None
-    return f"made with other settings ({'; '.join(changed[:3])}{'; …' if len(changed) > 3 else ''})"
+    return f"made with other settings ({listed(changed)})"
