@@ -691,6 +691,9 @@ def test_selfcal_steps_reads_the_final_lights_off_both_fits_as_the_default_decid
     with pytest.raises(SystemExit):
         study.main(["--steps", "300", "--marks", "250", "400"])
     assert "--marks [250, 400]: each must be a multiple of 100 up to --steps (300)" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        study.main(["--set", "selfcal.lr_lights=0.006"])
+    assert "--set: give the run its own --tag (or --out)" in capsys.readouterr().err
 
 
 def test_selfcal_steps_stops_each_trace_where_its_lights_settle():

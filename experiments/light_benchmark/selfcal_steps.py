@@ -4,6 +4,7 @@
     python experiments/light_benchmark/selfcal_steps.py --only benchmark --sets 12
     python experiments/light_benchmark/selfcal_steps.py --report --marks 300 500 1000
     python experiments/light_benchmark/selfcal_steps.py --report --settle 0.02 0.05 0.1 0.2
+    python experiments/light_benchmark/selfcal_steps.py --set selfcal.lr_lights=0.006 --tag lr0.006
 
 Each case (``benchmark.py``'s) is estimated by the network and the reversal test, then fitted as
 the default self-calibration fits (:func:`unps.lights.selfcal.frame_held_then_pulled`), each fit
@@ -33,6 +34,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from hydra.errors import ConfigCompositionException
 
 from unps.lights.selfcal import fit_once, flattening, warned_inside_out, working_images
 from unps.metrics import angular_error
@@ -136,21 +138,29 @@ def main(argv=None) -> None:
                         help="fixed numbers of steps to report (multiples of 100, or --steps)")
     parser.add_argument("--settle", type=float, nargs="*", default=[],
                         help="light.selfcal.settle_deg values to read off the traces")
+    parser.add_argument("--set", dest="settings", nargs="*", default=[],
+                        help="light.<key>=<value> overrides of both fits, e.g. selfcal.lr_lights=0.006")
+    parser.add_argument("--tag", default=None,
+                        help="names the results folder with the overrides (default: selfcal_steps-<steps>)")
     args = parser.parse_args(argv)
     bad = [m for m in args.marks if m > args.steps or (m % 100 and m != args.steps)]
     if bad:
         parser.error(f"--marks {bad}: each must be a multiple of 100 up to --steps ({args.steps}), "
                      "or --steps")
-    out = args.out or args.cache / "results" / f"selfcal_steps-{args.steps}"
-    every_step = [f"selfcal.steps={args.steps}", "selfcal.settle_deg=0"]
+    if args.settings and not (args.tag or args.out):
+        parser.error("--set: give the run its own --tag (or --out)")
+    folder = f"selfcal_steps-{args.steps}" + (f"-{args.tag}" if args.tag else "")
+    out = args.out or args.cache / "results" / folder
+    every_step = [*args.settings, f"selfcal.steps={args.steps}", "selfcal.settle_deg=0"]
     try:
         runs.claim(out, {"steps": args.steps, "scenes": scenes.SCENE_VERSION, "fits": "held, then pulled",
                          "light": benchmark.light_settings(["reversal", "selfcal"], every_step),
                          "weights": runs.weights_digest(None)})
-    except ValueError as e:
+    except (ValueError, ConfigCompositionException) as e:
         parser.error(str(e))
     print(f"network → reversal test → self-calibration (the frame held, then pulled where that "
-          f"flattens), each fit {args.steps} steps; results in {out}")
+          f"flattens), each fit {args.steps} steps{'; ' + ' '.join(args.settings) if args.settings else ''}; "
+          f"results in {out}")
     network, _ = benchmark.light_source(["reversal"], [])
     settings = benchmark.instantiate_node(["fit"], ["light=selfcal", *(f"light.{s}" for s in every_step)],
                                           "light.selfcal")()
