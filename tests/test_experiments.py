@@ -696,6 +696,14 @@ def test_selfcal_steps_reads_the_final_lights_off_both_fits_as_the_default_decid
     assert "--set: give the run its own --tag (or --out)" in capsys.readouterr().err
 
 
+def test_selfcal_steps_names_a_setting_the_config_lacks_and_makes_no_folder(capsys, tmp_path):
+    study = load_script("lb_selfcal_steps", "experiments/light_benchmark/selfcal_steps.py")
+    with pytest.raises(SystemExit):
+        study.main(["--set", "selfcal.no_such_setting=1", "--tag", "x", "--cache", str(tmp_path)])
+    assert "selfcal.no_such_setting" in capsys.readouterr().err
+    assert not (tmp_path / "results").exists()
+
+
 def test_selfcal_steps_stops_each_trace_where_its_lights_settle():
     study = load_script("lb_selfcal_steps", "experiments/light_benchmark/selfcal_steps.py")
 
