@@ -105,7 +105,12 @@ class SelfCalibration:
             per channel, and a fit that cannot correct them moves the directions to absorb what
             it cannot render (a matte sphere's 12 network lights: moved 1.03° and 2.56° →
             2.82° off with one scale per image).
-        lr: learning rate of depth, albedo and lobes.
+        lr: learning rate of depth, albedo and lobes. 0.02 (0.01 until 2026-12-03): the lights
+            move as fast as the surface under them settles, and at twice the surface's step the
+            fits settle in fewer steps nearer the truth (on the light benchmark 7.89 / 9.33 /
+            8.76° → 7.83 / 8.64 / 8.72° over the 21 objects traced at every light count, the
+            tablet's raise under 20 lights +1.81° → +0.19°; ``experiments/light_benchmark/README.md``,
+            "A larger step for the surface").
         lr_lights: learning rate of the light frame and per-light residuals.
         residual_weight: weight of the mean squared per-light residual |ε_i|².
         gbr_weight: weight of the pull of the bas-relief parameters (μ, ν, λ) toward (0, 0, 1).
@@ -142,7 +147,7 @@ class SelfCalibration:
     hold_frame: bool = False
     frame_held_first: bool = True
     fit_colour: bool = True
-    lr: float = 0.01
+    lr: float = 0.02
     lr_lights: float = 0.003
     residual_weight: float = 0.1
     gbr_weight: float = 0.003
