@@ -295,6 +295,29 @@ def test_nir_benchmark_reads_one_row_per_seed_and_averages(tmp_path):
         benchmark.unps_rows(tmp_path, "ball-gt-unps-fast", ["subject=ball", "preset.input_noise_var=0.3"], [0])
 
 
+def test_nir_benchmark_fits_a_stale_row_afresh(tmp_path, monkeypatch):
+    """A finished row made with other settings is fitted again from nothing: the checkpoint it
+    left (which unps.fit would refuse as another run's) is gone before the fit starts."""
+    benchmark = load_script("nir_benchmark_stale", "experiments/neural_inverse_rendering/benchmark.py")
+    row = tmp_path / "ball-selfcal-unps-fast"
+    (row / ".hydra").mkdir(parents=True)
+    (row / "checkpoints").mkdir()
+    (row / "checkpoints" / "last.ckpt").write_text("a checkpoint of the old settings")
+    (row / "metrics.json").write_text(json.dumps({"normal_mae": 9.0}))
+    old = benchmark.runs.fit_settings(["subject=ball", "seed=1"])
+    (row / ".hydra" / "config.yaml").write_text(json.dumps(old))
+    seen = []
+
+    def fit(command, **kwargs):
+        seen.append(sorted(p.name for p in row.rglob("*")))
+        (row / "metrics.json").write_text(json.dumps({"normal_mae": 2.0}))
+        return subprocess.CompletedProcess(command, 0, "", "")
+
+    monkeypatch.setattr(benchmark.subprocess, "run", fit)
+    assert benchmark.run(row, "subject=ball", "seed=0")["normal_mae"] == 2.0
+    assert seen == [[]]
+
+
 def test_nir_benchmark_names_a_missing_diligent_folder(tmp_path):
     """--diligent points the benchmark at DiLiGenT; a folder that is not there is named, nothing run."""
     missing = tmp_path / "no-diligent"

@@ -56,8 +56,8 @@ LIGHTS = ("gt", "estimated", "selfcal", "refine")
 def run_row(folder: Path, obj: scenes.BenchmarkObject, method: str, light: str,
             settings: list[str], out: Path) -> dict:
     """One ``python -m unps.fit`` run (skipped when its metrics.json exists and its run was made
-    with the settings this one would be, :func:`runs.stale_run`; refused while another process runs it,
-    :func:`runs.held`); its metrics."""
+    with the settings this one would be, :func:`runs.stale_run`, else made again from nothing,
+    :func:`runs.discard`; refused while another process runs it, :func:`runs.held`); its metrics."""
     run_dir = out / f"{obj.name}-{method}"
     metrics = run_dir / "metrics.json"
     overrides = ["subject=folder", f"subject.root={folder}", f"subject.name={obj.name}",
@@ -71,7 +71,8 @@ def run_row(folder: Path, obj: scenes.BenchmarkObject, method: str, light: str,
         try:
             with runs.held(run_dir):
                 print(f"  running {obj.name} {method}", flush=True)
-                metrics.unlink(missing_ok=True)
+                if why:
+                    runs.discard(run_dir)
                 done = subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                                       env={**os.environ, "HYDRA_FULL_ERROR": "1"})
         except RuntimeError as busy:

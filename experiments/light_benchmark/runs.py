@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shutil
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -118,6 +119,21 @@ def held(run_dir: Path) -> Iterator[None]:
         yield
     finally:
         mark.unlink(missing_ok=True)
+
+
+def discard(run_dir: Path) -> None:
+    """Delete what a run left in ``run_dir`` (its checkpoints, metrics, pictures and Hydra record)
+    so that a fit made again there starts afresh: ``unps.fit`` resumes from a checkpoint it
+    finds, and refuses one made with other settings. The mark of :func:`held` stays."""
+    if not run_dir.is_dir():
+        return
+    for child in run_dir.iterdir():
+        if child.name == MARK:
+            continue
+        if child.is_dir() and not child.is_symlink():
+            shutil.rmtree(child)
+        else:
+            child.unlink()
 
 
 def _holder(mark: Path) -> int | None:

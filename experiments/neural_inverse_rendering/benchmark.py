@@ -54,7 +54,8 @@ def run(out: Path, *overrides: str) -> dict:
 
     A finished row is read, not refitted, and a killed one resumed, only if Hydra recorded it with
     these overrides; a finished row made with other settings than these overrides give now (a
-    default changed since, :func:`runs.stale_run`) is made again, and says so.
+    default changed since, :func:`runs.stale_run`) is made again from nothing (:func:`runs.discard`),
+    and says so.
     """
     metrics = out / "metrics.json"
     recorded = out / ".hydra" / "overrides.yaml"
@@ -66,7 +67,7 @@ def run(out: Path, *overrides: str) -> dict:
     why = runs.stale_run(out, runs.fit_settings(list(overrides))) if metrics.is_file() else None
     if why:
         print(f"  {out.name}: run again, {why}", flush=True)
-        metrics.unlink()
+        runs.discard(out)
     if not metrics.is_file():
         code = ("import atexit, json, resource, sys, runpy\n"
                 f"atexit.register(lambda: open({str(out / 'peak_rss_kb')!r}, 'w').write("
