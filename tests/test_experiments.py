@@ -296,8 +296,9 @@ def test_nir_benchmark_reads_one_row_per_seed_and_averages(tmp_path):
 
 
 def test_nir_benchmark_fits_a_stale_row_afresh(tmp_path, monkeypatch):
-    """A finished row made with other settings is fitted again from nothing: the checkpoint it
-    left (which unps.fit would refuse as another run's) is gone before the fit starts."""
+    """A finished or stopped row made with other settings is fitted again from nothing: the
+    checkpoint it left (which unps.fit would refuse as another run's) is gone before the fit
+    starts."""
     benchmark = load_script("nir_benchmark_stale", "experiments/neural_inverse_rendering/benchmark.py")
     row = tmp_path / "ball-selfcal-unps-fast"
     (row / ".hydra").mkdir(parents=True)
@@ -316,6 +317,13 @@ def test_nir_benchmark_fits_a_stale_row_afresh(tmp_path, monkeypatch):
     monkeypatch.setattr(benchmark.subprocess, "run", fit)
     assert benchmark.run(row, "subject=ball", "seed=0")["normal_mae"] == 2.0
     assert seen == [[]]
+    (row / "metrics.json").unlink()   # stopped part way under other settings: not resumed either
+    (row / ".hydra").mkdir()
+    (row / ".hydra" / "config.yaml").write_text(json.dumps(old))
+    (row / "checkpoints").mkdir()
+    (row / "checkpoints" / "last.ckpt").write_text("a checkpoint of the old settings")
+    assert benchmark.run(row, "subject=ball", "seed=0")["normal_mae"] == 2.0
+    assert seen == [[], []]
 
 
 def test_nir_benchmark_names_a_missing_diligent_folder(tmp_path):

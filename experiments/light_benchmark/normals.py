@@ -56,14 +56,15 @@ LIGHTS = ("gt", "estimated", "selfcal", "refine")
 def run_row(folder: Path, obj: scenes.BenchmarkObject, method: str, light: str,
             settings: list[str], out: Path) -> dict:
     """One ``python -m unps.fit`` run (skipped when its metrics.json exists and its run was made
-    with the settings this one would be, :func:`runs.stale_run`, else made again from nothing,
+    with the settings this one would be, :func:`runs.stale_run`, else made again from nothing, as is
+    a run stopped part way under other settings,
     :func:`runs.discard`; refused while another process runs it, :func:`runs.held`); its metrics."""
     run_dir = out / f"{obj.name}-{method}"
     metrics = run_dir / "metrics.json"
     overrides = ["subject=folder", f"subject.root={folder}", f"subject.name={obj.name}",
                  f"subject.quantization={scenes.quantization(obj.storage)}", f"light={light}",
                  f"method={method}", *(settings if method == "unps" else [])]
-    why = runs.stale_run(run_dir, runs.fit_settings(overrides)) if metrics.is_file() else None
+    why = runs.stale_run(run_dir, runs.fit_settings(overrides)) if runs.begun(run_dir) else None
     if why:
         print(f"  {obj.name} {method}: run again, {why}", flush=True)
     if why or not metrics.is_file():

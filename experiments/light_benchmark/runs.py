@@ -192,6 +192,12 @@ def fit_settings(overrides: list[str]) -> dict:
     return {key: config.get(key) for key in FIT_SETTINGS}
 
 
+def begun(run_dir: Path) -> bool:
+    """Whether a fit has run in ``run_dir``: finished (its ``metrics.json``) or stopped part way (the
+    settings Hydra records as it starts), so that :func:`stale_run` has something to judge."""
+    return (run_dir / "metrics.json").is_file() or (run_dir / ".hydra" / "config.yaml").is_file()
+
+
 def stale_run(run_dir: Path, expected: dict) -> str | None:
     """Why the run kept in ``run_dir`` cannot stand for a run with the settings ``expected``
     (:func:`fit_settings`): the settings that differ (a default changed since it ran), or no

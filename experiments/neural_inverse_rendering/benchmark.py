@@ -53,7 +53,7 @@ def run(out: Path, *overrides: str) -> dict:
     """One `unps.fit` in a fresh process; its metrics.json plus ``peak_rss_gb``.
 
     A finished row is read, not refitted, and a killed one resumed, only if Hydra recorded it with
-    these overrides; a finished row made with other settings than these overrides give now (a
+    these overrides; a finished or killed row made with other settings than these overrides give now (a
     default changed since, :func:`runs.stale_run`) is made again from nothing (:func:`runs.discard`),
     and says so.
     """
@@ -64,7 +64,7 @@ def run(out: Path, *overrides: str) -> dict:
         if done_with != wanted:
             raise ValueError(f"{out} was run with other overrides: it lacks {sorted(wanted - done_with)} "
                              f"and has {sorted(done_with - wanted)}; give this setting its own --out")
-    why = runs.stale_run(out, runs.fit_settings(list(overrides))) if metrics.is_file() else None
+    why = runs.stale_run(out, runs.fit_settings(list(overrides))) if runs.begun(out) else None
     if why:
         print(f"  {out.name}: run again, {why}", flush=True)
         runs.discard(out)
