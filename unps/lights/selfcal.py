@@ -107,10 +107,11 @@ class SelfCalibration:
             2.82° off with one scale per image).
         lr: learning rate of depth, albedo and lobes. 0.02 (0.01 until 2026-12-03): the lights
             move as fast as the surface under them settles, and at twice the surface's step the
-            fits settle in fewer steps nearer the truth (on the light benchmark 7.89 / 9.33 /
-            8.76° → 7.83 / 8.64 / 8.72° over the 21 objects traced at every light count, the
-            tablet's raise under 20 lights +1.81° → +0.19°; ``experiments/light_benchmark/README.md``,
-            "A larger step for the surface").
+            fits settle in a sixth to a quarter fewer steps nearer the truth: on the light
+            benchmark 7.89 / 9.33 / 8.76° → 7.60 / 8.96 / 8.61° under 96 / 20 / 12 lights, no
+            case raised by more than 1° (the tablet under 20 lights had been, +1.81°), DiLiGenT's
+            three 0.05–0.09° further off (``experiments/light_benchmark/README.md``, "A larger
+            step for the surface").
         lr_lights: learning rate of the light frame and per-light residuals.
         residual_weight: weight of the mean squared per-light residual |ε_i|².
         gbr_weight: weight of the pull of the bas-relief parameters (μ, ν, λ) toward (0, 0, 1).
