@@ -324,6 +324,10 @@ def test_nir_benchmark_fits_a_stale_row_afresh(tmp_path, monkeypatch):
     (row / "checkpoints" / "last.ckpt").write_text("a checkpoint of the old settings")
     assert benchmark.run(row, "subject=ball", "seed=0")["normal_mae"] == 2.0
     assert seen == [[], []]
+    with benchmark.runs.held(row):   # the mark of a run under way stays; all else goes
+        (row / "normals.png").write_text("a picture")
+        benchmark.runs.discard(row)
+        assert [p.name for p in row.iterdir()] == [benchmark.runs.MARK]
 
 
 def test_nir_benchmark_names_a_missing_diligent_folder(tmp_path):

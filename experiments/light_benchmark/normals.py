@@ -55,10 +55,10 @@ LIGHTS = ("gt", "estimated", "selfcal", "refine")
 
 def run_row(folder: Path, obj: scenes.BenchmarkObject, method: str, light: str,
             settings: list[str], out: Path) -> dict:
-    """One ``python -m unps.fit`` run (skipped when its metrics.json exists and its run was made
-    with the settings this one would be, :func:`runs.stale_run`, else made again from nothing, as is
-    a run stopped part way under other settings,
-    :func:`runs.discard`; refused while another process runs it, :func:`runs.held`); its metrics."""
+    """One ``python -m unps.fit`` run; its metrics. Skipped when its metrics.json exists and the run
+    was made with the settings this one would be (:func:`runs.stale_run`); a run finished or
+    stopped part way under other settings is made again from nothing (:func:`runs.discard`);
+    refused while another process runs it (:func:`runs.held`)."""
     run_dir = out / f"{obj.name}-{method}"
     metrics = run_dir / "metrics.json"
     overrides = ["subject=folder", f"subject.root={folder}", f"subject.name={obj.name}",
