@@ -705,7 +705,7 @@ def test_light_moves_splits_off_a_common_linear_map_of_the_scaled_lights(tmp_pat
 
 def test_selfcal_steps_reads_the_final_lights_off_both_fits_as_the_default_decides(capsys):
     """The held fit where it flattens the lights no more than the limit at the stop; the pulled fit
-    where it does; the start where both do."""
+    where it does; the start where both do; and so under a looser limit read off the same traces."""
     study = load_script("lb_selfcal_steps", "experiments/light_benchmark/selfcal_steps.py")
     held_kept = {"network": 10.0, "start": 8.0, "max_flattening_deg": 1.0, "inside_out": False, "pulled": None,
                  "held": {"trace": [[0, 8.0, 0.0], [100, 7.0, 0.2], [200, 6.0, 0.5], [250, 6.0, 0.6]]}}
@@ -723,6 +723,14 @@ def test_selfcal_steps_reads_the_final_lights_off_both_fits_as_the_default_decid
     assert line.split()[:7] == ["step", "200", "5.90°", "ratio", "0.738", "steps", "300"]
     assert "raised >1°:  0" in line and "worst +0.80° (pulled_late)" in line
     assert "vs the full length: 1 above, 0 below" in line                    # 5.8° against the start's 5.0°
+    looser = [study.with_limit(case, 2.0) for case in cases]                # held flattened 1.5° at 200: kept
+    assert study.final(looser[1], lambda fit: 200) == (7.5, 200)
+    assert study.final(study.with_limit(pulled_late, None), lambda fit: 250) == (7.0, 250)
+    assert study.changed_cases(cases, names, 2.0, lambda fit: 200) == "pulled_late 5.80° → 7.50°"
+    assert study.changed_cases(cases, names, 1.0, lambda fit: 200) == "none"
+    with pytest.raises(ValueError, match="a limit of 0.5° cannot be read off traces made with max_flattening_deg=1.0"):
+        study.with_limit(pulled_late, 0.5)
+    assert study.limit_value("none") is None and study.limit_value("1.5") == 1.5
     with pytest.raises(SystemExit):
         study.main(["--steps", "300", "--marks", "250", "400"])
     assert "--marks [250, 400]: each must be a multiple of 100 up to --steps (300)" in capsys.readouterr().err

@@ -4,6 +4,7 @@
     python experiments/light_benchmark/selfcal_steps.py --only benchmark --sets 12
     python experiments/light_benchmark/selfcal_steps.py --report --marks 300 500 1000
     python experiments/light_benchmark/selfcal_steps.py --report --settle 0.02 0.05 0.1 0.2
+    python experiments/light_benchmark/selfcal_steps.py --report --settle 0.1 --limits 1.5 2 none
     python experiments/light_benchmark/selfcal_steps.py --set selfcal.lr_lights=0.006 --tag lr0.006
 
 Each case (``benchmark.py``'s) is estimated by the network and the reversal test, then fitted as
@@ -25,6 +26,10 @@ stops): the final lights' mean direction error (the held fit where it is kept, e
 one, else the start, as the default decides), its ratio to the network's, the steps taken by both
 fits together, the cases raised by more than 1° and 2° over the start (after the reversal test)
 with the worst, and the cases more than 0.3° above and below the full-length fits' result.
+For each value of ``--limits`` the same line as ``light.selfcal.max_flattening_deg`` at that value
+would give it (each fit stopped as the first ``--settle`` value says, else at its last read), then
+the cases it changes by more than 0.3°. The traces hold the pulled fit only where the held one
+flattened past the limit they were made with, so a limit below that one cannot be read off them.
 """
 
 from __future__ import annotations
@@ -116,6 +121,36 @@ def final(case: dict, stop) -> tuple[float, int]:
     return case["start"], steps
 
 
+def limit_value(text: str) -> float | None:
+    """A ``--limits`` value: degrees, or ``none`` (never decline)."""
+    return None if text.lower() in ("none", "null") else float(text)
+
+
+def with_limit(case: dict, limit: float | None) -> dict:
+    """``case`` as its traces read under ``light.selfcal.max_flattening_deg=limit``.
+
+    Raises:
+        ValueError: the limit is below the one the traces were made with (or the traces were made
+            with none), so the pulled fit it would need was not traced everywhere.
+    """
+    traced = case["max_flattening_deg"]
+    if limit is not None and (traced is None or limit < traced):
+        raise ValueError(f"a limit of {limit:g}° cannot be read off traces made with "
+                         f"max_flattening_deg={traced}: their pulled fits start above that")
+    return {**case, "max_flattening_deg": limit}
+
+
+def changed_cases(cases: list[dict], names: list[str], limit: float | None, stop) -> str:
+    """The cases whose final lights move by more than :data:`NOTABLE` under ``limit`` against the
+    traced limit, as ``name before → after``."""
+    moved = []
+    for name, case in zip(names, cases):
+        before, after = final(case, stop)[0], final(with_limit(case, limit), stop)[0]
+        if abs(after - before) > NOTABLE:
+            moved.append(f"{name} {before:.2f}° → {after:.2f}°")
+    return ", ".join(moved) or "none"
+
+
 def summary_line(label: str, cases: list[dict], names: list[str], stop) -> str:
     """One line: the cases' final lights with each fit stopped at ``stop(fit)`` (:func:`final`)."""
     network = np.mean([c["network"] for c in cases])
@@ -138,6 +173,9 @@ def main(argv=None) -> None:
                         help="fixed numbers of steps to report (multiples of 100, or --steps)")
     parser.add_argument("--settle", type=float, nargs="*", default=[],
                         help="light.selfcal.settle_deg values to read off the traces")
+    parser.add_argument("--limits", type=limit_value, nargs="*", default=[],
+                        help="light.selfcal.max_flattening_deg values (degrees, or none) to read off the "
+                             "traces, each fit stopped as the first --settle value says")
     parser.add_argument("--set", dest="settings", nargs="*", default=[],
                         help="light.<key>=<value> overrides of both fits, e.g. selfcal.lr_lights=0.006")
     parser.add_argument("--tag", default=None,
@@ -185,6 +223,16 @@ def main(argv=None) -> None:
         for value in args.settle:
             print(summary_line(f"settle {value:g}°", cases, names,
                                lambda fit, value=value: settled_step(fit, value)))
+        stop = ((lambda fit: settled_step(fit, args.settle[0])) if args.settle
+                else (lambda fit: int(fit["trace"][-1][0])))
+        for limit in args.limits:
+            try:
+                limited = [with_limit(case, limit) for case in cases]
+            except ValueError as e:
+                parser.error(f"--limits: {e}")
+            label = "no limit" if limit is None else f"limit {limit:g}°"
+            print(summary_line(label, limited, names, stop))
+            print(f"    changed: {changed_cases(cases, names, limit, stop)}")
 
 
 if __name__ == "__main__":
