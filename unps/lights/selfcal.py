@@ -126,11 +126,12 @@ class SelfCalibration:
             lights, :func:`flattening`); None: never. The light network already reads lights
             nearer the view axis than they are, never further on the whole, so a fit that
             flattens them further may have bought its loss along the bas-relief the images pin
-            least. On the light benchmark and its objects in one material the fits that raised
-            the error by more than 1° had flattened the lights by 1.62° or more (the rose), while
-            the held fits that flattened them by 1.06–1.48° gained on ten cases of eleven (a turn
-            about the view axis counts toward it); 1° until 2026-12-03
-            (``experiments/light_benchmark/README.md``, "Lights the fit flattens").
+            least. On the light benchmark and its objects in one material, each fit flattening
+            them past 1° that raised the error by more than 1° had flattened them by 1.62° or
+            more (the rose, vase-b, the ring, the pits), while the held fits that flattened them
+            by 1.02–1.48° gained on 10 cases of 11 (a turn about the view axis counts toward
+            it); 1° until 2026-12-03 (``experiments/light_benchmark/README.md``, "Lights the fit
+            flattens").
         decline_inside_out: keep the first guess, without fitting, when the reversal test kept
             the lights but warned that they may read the surface inside out
             (:attr:`unps.lights.reversal.AttachedLight.points_to_reversal`): a fit of a surface
