@@ -726,11 +726,14 @@ def test_selfcal_steps_reads_the_final_lights_off_both_fits_as_the_default_decid
     looser = [study.with_limit(case, 2.0) for case in cases]                # held flattened 1.5° at 200: kept
     assert study.final(looser[1], lambda fit: 200) == (7.5, 200)
     assert study.final(study.with_limit(pulled_late, None), lambda fit: 250) == (7.0, 250)
-    assert study.changed_cases(cases, names, 2.0, lambda fit: 200) == "pulled_late 5.80° → 7.50°"
-    assert study.changed_cases(cases, names, 1.0, lambda fit: 200) == "none"
+    assert study.changed_cases(cases, looser, names, lambda fit: 200) == "pulled_late 5.80° → 7.50°"
+    assert study.changed_cases(cases, cases, names, lambda fit: 200) == "none"
     with pytest.raises(ValueError, match="a limit of 0.5° cannot be read off traces made with max_flattening_deg=1.0"):
         study.with_limit(pulled_late, 0.5)
     assert study.limit_value("none") is None and study.limit_value("1.5") == 1.5
+    with pytest.raises(SystemExit):
+        study.main(["--report", "--limits", "loose"])
+    assert "--limits: 'loose': give degrees (e.g. 1.5) or none" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         study.main(["--steps", "300", "--marks", "250", "400"])
     assert "--marks [250, 400]: each must be a multiple of 100 up to --steps (300)" in capsys.readouterr().err

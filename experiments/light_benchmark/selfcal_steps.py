@@ -34,6 +34,7 @@ flattened past the limit they were made with, so a limit below that one cannot b
 
 from __future__ import annotations
 
+import argparse
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -123,7 +124,12 @@ def final(case: dict, stop) -> tuple[float, int]:
 
 def limit_value(text: str) -> float | None:
     """A ``--limits`` value: degrees, or ``none`` (never decline)."""
-    return None if text.lower() in ("none", "null") else float(text)
+    if text.lower() in ("none", "null"):
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give degrees (e.g. 1.5) or none") from None
 
 
 def with_limit(case: dict, limit: float | None) -> dict:
@@ -140,15 +146,20 @@ def with_limit(case: dict, limit: float | None) -> dict:
     return {**case, "max_flattening_deg": limit}
 
 
-def changed_cases(cases: list[dict], names: list[str], limit: float | None, stop) -> str:
-    """The cases whose final lights move by more than :data:`NOTABLE` under ``limit`` against the
-    traced limit, as ``name before → after``."""
+def changed_cases(before: list[dict], after: list[dict], names: list[str], stop) -> str:
+    """The cases whose final lights move by more than :data:`NOTABLE` from ``before`` to
+    ``after`` (the same cases under another limit, :func:`with_limit`), as ``name before → after``."""
     moved = []
-    for name, case in zip(names, cases):
-        before, after = final(case, stop)[0], final(with_limit(case, limit), stop)[0]
-        if abs(after - before) > NOTABLE:
-            moved.append(f"{name} {before:.2f}° → {after:.2f}°")
+    for name, old, new in zip(names, before, after):
+        was, now = final(old, stop)[0], final(new, stop)[0]
+        if abs(now - was) > NOTABLE:
+            moved.append(f"{name} {was:.2f}° → {now:.2f}°")
     return ", ".join(moved) or "none"
+
+
+def last_read(fit: dict) -> int:
+    """The step of a fit's last read: where it stops when nothing stops it sooner."""
+    return int(fit["trace"][-1][0])
 
 
 def summary_line(label: str, cases: list[dict], names: list[str], stop) -> str:
@@ -156,7 +167,7 @@ def summary_line(label: str, cases: list[dict], names: list[str], stop) -> str:
     network = np.mean([c["network"] for c in cases])
     done = [final(c, stop) for c in cases]
     at = np.array([error for error, _ in done])
-    full = np.array([final(c, lambda fit: int(fit["trace"][-1][0]))[0] for c in cases])
+    full = np.array([final(c, last_read)[0] for c in cases])
     raised = at - np.array([c["start"] for c in cases])
     worst, off = int(np.argmax(raised)), at - full
     return (f"  {label:<14}{at.mean():6.2f}°  ratio {at.mean() / network:.3f}  steps "
@@ -223,8 +234,7 @@ def main(argv=None) -> None:
         for value in args.settle:
             print(summary_line(f"settle {value:g}°", cases, names,
                                lambda fit, value=value: settled_step(fit, value)))
-        stop = ((lambda fit: settled_step(fit, args.settle[0])) if args.settle
-                else (lambda fit: int(fit["trace"][-1][0])))
+        stop = (lambda fit: settled_step(fit, args.settle[0])) if args.settle else last_read
         for limit in args.limits:
             try:
                 limited = [with_limit(case, limit) for case in cases]
@@ -232,7 +242,7 @@ def main(argv=None) -> None:
                 parser.error(f"--limits: {e}")
             label = "no limit" if limit is None else f"limit {limit:g}°"
             print(summary_line(label, limited, names, stop))
-            print(f"    changed: {changed_cases(cases, names, limit, stop)}")
+            print(f"    changed: {changed_cases(cases, limited, names, stop)}")
 
 
 if __name__ == "__main__":
