@@ -90,9 +90,6 @@ class SelfCalibration:
             buys its loss with a transform of the whole set (a rotation, a bas-relief, a stretch
             of the elevations): on the light benchmark one such transform came within 0.5° of
             a drifted free fit's lights (``experiments/light_benchmark/free_fits.py``).
-        free_shear: with ``hold_frame``, let the frame's shear go (l → (l_x + a l_z, l_y + b l_z,
-            l_z)): the part of a common turn of the lights that the bas-relief cannot make and
-            integrability pins (measured on the light benchmark, 2026-12-03).
         frame_held_first: fit first with the shared frame held and no pull toward the first
             guess (``hold_frame=True, prior_weight=0``: each light moves by its own residual
             alone), keep that fit unless it is declined (it flattened the lights more than
@@ -151,7 +148,6 @@ class SelfCalibration:
     skip_black: bool = False
     censor_black: bool = True
     hold_frame: bool = False
-    free_shear: bool = False
     frame_held_first: bool = True
     fit_colour: bool = True
     lr: float = 0.02
@@ -495,12 +491,6 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
     surface_parameters = [model.log_albedo, model.lobe_logits, *model.depth.parameters()]
     light_parameters = [model.light_residual] if settings.hold_frame else [
         model.columns, model.gbr, model.light_residual]
-    if settings.hold_frame and settings.free_shear:
-        # only the columns' z components: l -> (l_x + a l_z, l_y + b l_z, l_z)
-        only_shear = torch.zeros_like(model.columns)
-        only_shear[2, :] = 1.0
-        model.columns.register_hook(lambda grad: grad * only_shear)
-        light_parameters.append(model.columns)
     if settings.fit_colour:
         light_parameters.append(model.log_tint)
     optimiser = torch.optim.Adam([
