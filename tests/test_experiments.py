@@ -718,6 +718,14 @@ def test_selfcal_steps_reads_the_final_lights_off_both_fits_as_the_default_decid
     assert study.final(pulled_late, lambda fit: 250) == (5.0, 500)          # both declined: the start
     assert study.final({**pulled_late, "inside_out": True, "held": None, "pulled": None},
                        lambda fit: 200) == (5.0, 0)                          # no fit at all
+    reads = [[[0.0, 0.0, 1.0]], [[0.1, 0.0, 0.995]], [[0.2, 0.0, 0.98]], [[0.3, 0.0, 0.954]]]
+    traced = {**pulled_late, "held": {**pulled_late["held"], "directions": reads},
+              "pulled": {**pulled_late["pulled"], "directions": reads[::-1]}}
+    assert study.final_directions(traced, lambda fit: 100).tolist() == reads[1]    # the held fit's
+    assert study.final_directions(traced, lambda fit: 200).tolist() == reads[1]    # the pulled fit's 200
+    assert study.final_directions(traced, lambda fit: 250).tolist() == reads[0]    # the start's
+    assert study.final_directions({**traced, "inside_out": True, "held": None, "pulled": None},
+                                  lambda fit: 200) is None                   # no trace of the start
     names, cases = ["held_kept", "pulled_late"], [held_kept, pulled_late]
     line = study.summary_line("step 200", cases, names, lambda fit: 200)
     assert line.split()[:7] == ["step", "200", "5.90°", "ratio", "0.738", "steps", "300"]
@@ -1198,3 +1206,20 @@ def test_reach_study_reads_each_light_against_its_zenith_under_both_rigs():
     assert reach.paired_objects(rows, "12") == ["a"]
     assert "0–25°        1      2.00°         5.00°" in reach.by_reach(rows)
     assert "DiLiGenT's 5.00°, DiLiGenT's lights read as drawn ones at their zenith 3.00°" in reach.by_zenith(rows)
+
+
+def test_turn_share_finds_each_transform_it_is_made_of():
+    turn_share = load_script("lb_turn_share", "experiments/light_benchmark/turn_share.py")
+    rng = np.random.default_rng(0)
+    truth = rng.normal(size=(40, 3))
+    truth[:, 2] = np.abs(truth[:, 2]) + 1.0
+    truth /= np.linalg.norm(truth, axis=-1, keepdims=True)
+    turned = turn_share.rotated(truth, np.radians([4.0, -3.0, 0.0]))
+    left = turn_share.left_after(turned, truth)
+    assert left["as is"] > 3.0 and left["rotation"] < 0.01
+    sheared = turn_share.sheared(truth, [0.08, -0.05])
+    left = turn_share.left_after(sheared, truth)
+    assert left["as is"] > 2.0 and left["shear"] < 0.01 and left["bas-relief"] > 0.5
+    flattened = turn_share.bas_relief(truth, [0.1, 0.0, np.log(1.3)])
+    left = turn_share.left_after(flattened, truth)
+    assert left["as is"] > 2.0 and left["bas-relief"] < 0.01 and left["shear"] > 0.5

@@ -102,24 +102,40 @@ def settled_step(fit: dict, settle_deg: float) -> int:
     return steps[-1]
 
 
-def final(case: dict, stop) -> tuple[float, int]:
-    """The final lights' direction error and the steps of both fits together, each fit stopped at
-    ``stop(fit)``: the held fit's lights unless they are flattened by more than the limit there,
-    else the pulled fit's under the same rule, else the start's (and the start's, without a fit,
-    where the reversal test warned that the start may be inside out)."""
+def final_read(case: dict, stop) -> tuple[dict | None, int, int]:
+    """Where the final lights are read, each fit stopped at ``stop(fit)``: the fit (None: the
+    start's lights), the index of its read, and the steps of both fits together. The held fit's
+    lights unless they are flattened by more than the limit there, else the pulled fit's under the
+    same rule, else the start's (and the start's, without a fit, where the reversal test warned
+    that the start may be inside out)."""
     steps = 0
     if case["inside_out"]:
-        return case["start"], steps
+        return None, 0, steps
     for fit in (case["held"], case["pulled"]):
         if fit is None:       # the held fit flattened nowhere, so it was kept
             break
         at = stop(fit)
         steps += at
-        _, error, flattened = next(row for row in fit["trace"] if int(row[0]) == at)
+        index = next(k for k, row in enumerate(fit["trace"]) if int(row[0]) == at)
         limit = case["max_flattening_deg"]
-        if limit is None or flattened <= limit:
-            return error, steps
-    return case["start"], steps
+        if limit is None or fit["trace"][index][2] <= limit:
+            return fit, index, steps
+    return None, 0, steps
+
+
+def final(case: dict, stop) -> tuple[float, int]:
+    """The final lights' direction error and the steps of both fits together (:func:`final_read`)."""
+    fit, index, steps = final_read(case, stop)
+    return (case["start"] if fit is None else fit["trace"][index][1]), steps
+
+
+def final_directions(case: dict, stop) -> np.ndarray | None:
+    """(n, 3) the final lights (:func:`final_read`); None where no fit was traced (the reversal
+    test warned), so the start's directions are not in the traces."""
+    fit, index, _ = final_read(case, stop)
+    if fit is None:
+        return None if case["held"] is None else np.asarray(case["held"]["directions"][0])
+    return np.asarray(fit["directions"][index])
 
 
 def limit_value(text: str) -> float | None:
