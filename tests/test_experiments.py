@@ -758,6 +758,26 @@ def test_selfcal_steps_names_a_setting_the_config_lacks_and_makes_no_folder(caps
     assert not (tmp_path / "results").exists()
 
 
+def test_selfcal_steps_reads_the_marks_and_settle_lines_under_the_limit_asked_for(capsys, tmp_path):
+    """``--limit`` applies to every case before the lines are read; a limit below the one the
+    traces are made with is refused before any folder is made."""
+    study = load_script("lb_selfcal_steps", "experiments/light_benchmark/selfcal_steps.py")
+    flattens = {"network": 6.0, "start": 5.0, "max_flattening_deg": 1.0, "inside_out": False,
+                "held": {"trace": [[0, 5.0, 0.0], [100, 4.0, 1.2]]},
+                "pulled": {"trace": [[0, 5.0, 0.0], [100, 4.5, 0.1]]}}
+    assert study.final(study.with_limit(flattens, study.TRACED), lambda fit: 100) == (4.5, 200)
+    assert study.final(study.with_limit(flattens, study.limit_value("1.5")), lambda fit: 100) == (4.0, 100)
+    with pytest.raises(SystemExit):
+        study.main(["--limit", "0.5", "--set", "selfcal.max_flattening_deg=1", "--tag", "x",
+                    "--cache", str(tmp_path)])
+    assert "--limit: a limit of 0.5° cannot be read off traces made with max_flattening_deg=1" in \
+        capsys.readouterr().err
+    assert not (tmp_path / "results").exists()
+    with pytest.raises(SystemExit):
+        study.main(["--report", "--limits", "traced"])
+    assert "--limits: give degrees or none" in capsys.readouterr().err
+
+
 def test_selfcal_steps_stops_each_trace_where_its_lights_settle():
     study = load_script("lb_selfcal_steps", "experiments/light_benchmark/selfcal_steps.py")
 

@@ -4,6 +4,7 @@
     python experiments/light_benchmark/selfcal_steps.py --only benchmark --sets 12
     python experiments/light_benchmark/selfcal_steps.py --report --marks 300 500 1000
     python experiments/light_benchmark/selfcal_steps.py --report --settle 0.02 0.05 0.1 0.2
+    python experiments/light_benchmark/selfcal_steps.py --report --settle 0.1 --limit 1.5
     python experiments/light_benchmark/selfcal_steps.py --report --settle 0.1 --limits 1.5 2 none
     python experiments/light_benchmark/selfcal_steps.py --set selfcal.lr_lights=0.006 --tag lr0.006
 
@@ -25,11 +26,13 @@ where its lights moved no more than that on average since the one before, as the
 stops): the final lights' mean direction error (the held fit where it is kept, else the pulled
 one, else the start, as the default decides), its ratio to the network's, the steps taken by both
 fits together, the cases raised by more than 1° and 2° over the start (after the reversal test)
-with the worst, and the cases more than 0.3° above and below the full-length fits' result.
-For each value of ``--limits`` the same line as ``light.selfcal.max_flattening_deg`` at that value
-would give it (each fit stopped as the first ``--settle`` value says, else at its last read), then
-the cases it changes by more than 0.3°. The traces hold the pulled fit only where the held one
-flattened past the limit they were made with, so a limit below that one cannot be read off them.
+with the worst, and the cases more than 0.3° above and below the full-length fits' result;
+all of it read under ``light.selfcal.max_flattening_deg`` at ``--limit`` (default: the limit the
+traces were made with). For each value of ``--limits`` the same line as
+``light.selfcal.max_flattening_deg`` at that value would give it (each fit stopped as the first
+``--settle`` value says, else at its last read), then the cases it changes by more than 0.3°.
+The traces hold the pulled fit only where the held one flattened past the limit they were made
+with, so a limit below that one cannot be read off them.
 """
 
 from __future__ import annotations
@@ -52,6 +55,7 @@ import scenes  # noqa: E402
 
 MARKS = (300, 500, 700, 1000)
 NOTABLE = 0.3   # degrees from the full-length fits' error
+TRACED = "traced"   # --limit's default: the limit each trace was made with
 
 
 def trace_fit(images, start, settings, truth: np.ndarray) -> dict:
@@ -138,8 +142,11 @@ def final_directions(case: dict, stop) -> np.ndarray | None:
     return np.asarray(fit["directions"][index])
 
 
-def limit_value(text: str) -> float | None:
-    """A ``--limits`` value: degrees, or ``none`` (never decline)."""
+def limit_value(text: str) -> float | None | str:
+    """A ``--limit`` or ``--limits`` value: degrees, or ``none`` (never decline); ``traced`` (the
+    limit the traces were made with) passes as it is."""
+    if text == TRACED:
+        return TRACED
     if text.lower() in ("none", "null"):
         return None
     try:
@@ -156,6 +163,8 @@ def with_limit(case: dict, limit: float | None) -> dict:
             with none), so the pulled fit it would need was not traced everywhere.
     """
     traced = case["max_flattening_deg"]
+    if limit == TRACED:
+        return case
     if limit is not None and (traced is None or limit < traced):
         raise ValueError(f"a limit of {limit:g}° cannot be read off traces made with "
                          f"max_flattening_deg={traced}: their pulled fits start above that")
@@ -203,6 +212,9 @@ def main(argv=None) -> None:
     parser.add_argument("--limits", type=limit_value, nargs="*", default=[],
                         help="light.selfcal.max_flattening_deg values (degrees, or none) to read off the "
                              "traces, each fit stopped as the first --settle value says")
+    parser.add_argument("--limit", type=limit_value, default=TRACED,
+                        help="light.selfcal.max_flattening_deg (degrees, or none) the --marks and --settle "
+                             "lines are read under (default: the one the traces were made with)")
     parser.add_argument("--set", dest="settings", nargs="*", default=[],
                         help="light.<key>=<value> overrides of both fits, e.g. selfcal.lr_lights=0.006")
     parser.add_argument("--tag", default=None,
@@ -212,26 +224,36 @@ def main(argv=None) -> None:
     if bad:
         parser.error(f"--marks {bad}: each must be a multiple of 100 up to --steps ({args.steps}), "
                      "or --steps")
+    if TRACED in args.limits:
+        parser.error("--limits: give degrees or none (traced is --limit's default only)")
     if args.settings and not (args.tag or args.out):
         parser.error("--set: give the run its own --tag (or --out)")
     folder = f"selfcal_steps-{args.steps}" + (f"-{args.tag}" if args.tag else "")
     out = args.out or args.cache / "results" / folder
     every_step = [*args.settings, f"selfcal.steps={args.steps}", "selfcal.settle_deg=0"]
     try:
-        runs.claim(out, {"steps": args.steps, "scenes": scenes.SCENE_VERSION, "fits": "held, then pulled",
-                         "light": benchmark.light_settings(["reversal", "selfcal"], every_step),
-                         "weights": runs.weights_digest(None)})
+        light = benchmark.light_settings(["reversal", "selfcal"], every_step)
+        settings = benchmark.instantiate_node(["fit"], ["light=selfcal", *(f"light.{s}" for s in every_step)],
+                                              "light.selfcal")()
     except (ValueError, ConfigCompositionException) as e:
+        parser.error(str(e))
+    try:
+        with_limit({"max_flattening_deg": settings.max_flattening_deg}, args.limit)
+    except ValueError as e:
+        parser.error(f"--limit: {e}")
+    try:
+        runs.claim(out, {"steps": args.steps, "scenes": scenes.SCENE_VERSION, "fits": "held, then pulled",
+                         "light": light, "weights": runs.weights_digest(None)})
+    except ValueError as e:
         parser.error(str(e))
     print(f"network → reversal test → self-calibration (the frame held, then pulled where that "
           f"flattens), each fit {args.steps} steps{'; ' + ' '.join(args.settings) if args.settings else ''}; "
           f"results in {out}")
     network, _ = benchmark.light_source(["reversal"], [])
-    settings = benchmark.instantiate_node(["fit"], ["light=selfcal", *(f"light.{s}" for s in every_step)],
-                                          "light.selfcal")()
 
     def progress(case, result, _) -> str:
         group, name, label = case
+        result = with_limit(result, args.limit)
         marks = "  ".join(f"{m}: {final(result, lambda fit, m=m: m)[0]:6.2f}°" for m in args.marks)
         note = "  inside out" if result["inside_out"] else "  pulled" if result["pulled"] is not None else ""
         return (f"{group:<10}{name:<12}{label:>4}  network {result['network']:6.2f}°  start "
@@ -241,7 +263,8 @@ def main(argv=None) -> None:
                           lambda subject: trace_case(subject, network, settings),
                           lambda result: result, progress, args.report)
     print("\n".join(progress(case, result, None) for case, result in rows.items()))
-    for group, label, cases in runs.by_light_set(rows):
+    for group, label, traced in runs.by_light_set(rows):
+        cases = [with_limit(case, args.limit) for case in traced]
         names = [name for g, name, lab in rows if (g, lab) == (group, label)]
         network_mean = np.mean([c["network"] for c in cases])
         print(f"\n{group} {label} ({len(cases)} cases; network {network_mean:.2f}°)")
@@ -253,7 +276,7 @@ def main(argv=None) -> None:
         stop = (lambda fit: settled_step(fit, args.settle[0])) if args.settle else last_read
         for limit in args.limits:
             try:
-                limited = [with_limit(case, limit) for case in cases]
+                limited = [with_limit(case, limit) for case in traced]
             except ValueError as e:
                 parser.error(f"--limits: {e}")
             label = "no limit" if limit is None else f"limit {limit:g}°"
