@@ -932,6 +932,32 @@ def test_logging_only_the_steps_whose_figures_are_read_writes_what_logging_every
     assert all("normal error" in line for line in lines_every)
 
 
+def test_a_slow_fit_logs_a_progress_line_at_least_once_a_minute(monkeypatch, caplog):
+    """7 s a step: beside the line every 100 steps, one on the first step whose figures are fresh
+    (every 10) once 60 s have passed since the last line; a fast fit gets the 100-step lines only."""
+    from types import SimpleNamespace
+
+    import unps.inverse.callbacks as callbacks
+
+    def lines_at(seconds_per_step: float) -> list[int]:
+        now = [0.0]
+        monkeypatch.setattr(callbacks, "time", SimpleNamespace(perf_counter=lambda: now[0]))
+        progress = callbacks.ProgressLog(every=100, at_least_every_s=60.0, fresh_every=10)
+        trainer = SimpleNamespace(global_step=0, max_steps=200, callback_metrics={"loss/reconstruction": 0.5})
+        progress.on_train_start(trainer, None)
+        caplog.clear()
+        with caplog.at_level(logging.INFO, logger="unps.inverse.fit"):
+            for step in range(1, 201):
+                trainer.global_step, now[0] = step, step * seconds_per_step
+                progress.on_train_batch_end(trainer, None, None, None, step - 1)
+        return [int(re.match(r"step (\d+)/200", r.getMessage()).group(1)) for r in caplog.records]
+
+    assert lines_at(7.0) == [10, 20, 30, 40, 50, 60, 70, 80, 90, 100, 110, 120, 130, 140, 150, 160, 170,
+                             180, 190, 200]
+    assert lines_at(2.5) == [30, 60, 90, 100, 130, 160, 190, 200]
+    assert lines_at(0.1) == [100, 200]
+
+
 def test_a_fit_that_stops_moving_says_so_and_a_healthy_one_does_not(tmp_path):
     healthy = fit(config(tmp_path / "healthy", *tiny_overrides(steps=40), "light=gt"))
     assert not any("stopped moving" in w for w in healthy["warnings"])

@@ -69,6 +69,12 @@ class FitPictures(L.Callback):
                          dataformats="HWC")
 
 
+PROGRESS_SECONDS = 60.0
+"""The longest a fit goes without a progress line: the paper preset on a 2-core CPU takes 2.4 s
+(ball) to about 9 s (pot1) a step, so a line every 100 steps alone would leave a user four to
+fifteen minutes without a word."""
+
+
 class ProgressLog(L.Callback):
     """One log line every ``every`` steps and at the end: step, loss, MAE when the truth is
     known, seconds per step and time left. Readable in a terminal and in the run's log file,
@@ -77,23 +83,36 @@ class ProgressLog(L.Callback):
     FIT = (("loss", "loss/reconstruction", "{:.4f}"), ("normal error", "mae", "{:.2f}°"))
 
     def __init__(self, every: int = 100, shown: tuple[tuple[str, str, str], ...] = FIT,
-                 logger: logging.Logger = log, after_validation: bool = False):
+                 logger: logging.Logger = log, after_validation: bool = False,
+                 at_least_every_s: float | None = None, fresh_every: int = 1):
         """``shown``: (label, logged metric, format) of each figure on the line, when logged.
         ``after_validation``: one line at the end of each validation instead of every ``every``
-        steps, so that the line carries the figures of the validation just run."""
+        steps, so that the line carries the figures of the validation just run.
+        ``at_least_every_s``: a line also once that many seconds have passed since the last one,
+        on the next step that logs its figures (every ``fresh_every`` steps); None: never."""
         self.every, self.shown, self._log = every, shown, logger
         self.after_validation = after_validation
+        self.at_least_every_s, self.fresh_every = at_least_every_s, fresh_every
         self._start: float | None = None
+        self._last_line: float | None = None
         self._first_step = 0
 
     def on_train_start(self, trainer, module) -> None:
         self._start, self._first_step = time.perf_counter(), trainer.global_step
+        self._last_line = self._start
 
     @rank_zero_only
     def on_train_batch_end(self, trainer, module, outputs, batch, batch_idx) -> None:
+        if self.after_validation:
+            return
         step = trainer.global_step
-        if not self.after_validation and (step % self.every == 0 or step == trainer.max_steps):
+        due = step % self.every == 0 or step == trainer.max_steps
+        if due or self._overdue(step):
             self._line(trainer)
+
+    def _overdue(self, step: int) -> bool:
+        return (self.at_least_every_s is not None and step % self.fresh_every == 0
+                and time.perf_counter() - self._last_line >= self.at_least_every_s)
 
     @rank_zero_only
     def on_validation_end(self, trainer, module) -> None:
@@ -102,7 +121,8 @@ class ProgressLog(L.Callback):
 
     def _line(self, trainer) -> None:
         step = trainer.global_step
-        per_step = (time.perf_counter() - self._start) / max(step - self._first_step, 1)
+        self._last_line = time.perf_counter()
+        per_step = (self._last_line - self._start) / max(step - self._first_step, 1)
         metrics = trainer.callback_metrics
         shown = [f"{label} {form.format(float(metrics[key]))}" for label, key, form in self.shown
                  if key in metrics]

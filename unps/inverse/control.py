@@ -54,10 +54,11 @@ def train(system: InverseRendering, schedule: Schedule, output_dir: str | Path |
     from lightning.pytorch.callbacks import ModelCheckpoint
     from lightning.pytorch.loggers import TensorBoardLogger
 
-    from unps.inverse.callbacks import FitPictures, ProgressLog, StallWatch
+    from unps.inverse.callbacks import PROGRESS_SECONDS, FitPictures, ProgressLog, StallWatch
 
     ckpt_path, resumed_from = None, 0
-    progress = ProgressLog(every=schedule.update_every)
+    progress = ProgressLog(every=schedule.update_every, at_least_every_s=PROGRESS_SECONDS,
+                           fresh_every=system.log_every)
     watch = StallWatch(every=schedule.update_every, until=schedule.lr_drop_at)
     options: dict = dict(logger=False, enable_checkpointing=False, callbacks=[progress, watch])
     if output_dir is not None:
