@@ -15,7 +15,7 @@ from hydra.core.override_parser.overrides_parser import OverridesParser
 
 from conftest import diligent_object, load_script
 from unps.data.analytic import render_lambertian
-from unps.data.diligent import find_diligent_object, read_diligent, read_diligent_object
+from unps.data.diligent import find_diligent_object, read_diligent, read_diligent_object, read_folder
 from unps.data.lights import Lights
 from unps.data.writer import write_diligent
 from unps.errors import InputError
@@ -1243,3 +1243,29 @@ def test_turn_share_finds_each_transform_it_is_made_of():
     flattened = turn_share.bas_relief(truth, [0.1, 0.0, np.log(1.3)])
     left = turn_share.left_after(flattened, truth)
     assert left["as is"] > 2.0 and left["bas-relief"] < 0.01 and left["shear"] > 0.5
+
+
+def test_large_capture_writes_the_ball_enlarged_unclipped_with_its_lights(tmp_path, capsys):
+    """Four of ball's images at their own size: four 16-bit PNGs whose brightest value is the top
+    level, the chosen lights beside them, read back as a user's folder is; bad arguments refused."""
+    study = load_script("speed_large_capture", "experiments/speed/large_capture.py")
+    diligent = diligent_object("pmsData/ballPNG").parents[1]
+    folder = tmp_path / "capture"
+    assert study.write_capture(diligent, 4, 1, folder) == (612, 512)
+    assert sorted(p.name for p in folder.iterdir()) == ["000.png", "001.png", "002.png", "003.png",
+                                                        "light_directions.txt"]
+    assert not (tmp_path / "capture.partial").exists()
+    capture = read_folder(folder, name="capture")
+    ball = read_diligent_object(diligent, "ball")
+    chosen = study.evenly_spread(ball.light_directions, 4)
+    assert capture.images.shape == (4, 512, 612, 3)
+    np.testing.assert_allclose(capture.light_directions, ball.light_directions[chosen], atol=1e-5)
+    import cv2
+    assert max(int(cv2.imread(str(folder / f"{k:03d}.png"), cv2.IMREAD_UNCHANGED).max()) for k in range(4)) == 65535
+    for bad, says in ((["--images", "2"], "--images 2: between 3 and DiLiGenT's 96"),
+                      (["--scale", "0"], "--scale 0: a whole number, 1 or more"),
+                      (["--diligent", str(tmp_path)], "no pmsData/ballPNG there")):
+        with pytest.raises(SystemExit):
+            study.main([*bad, "--out", str(tmp_path / "out")])
+        assert says in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
