@@ -70,9 +70,9 @@ class FitPictures(L.Callback):
 
 
 PROGRESS_SECONDS = 60.0
-"""The longest a fit goes without a progress line: the paper preset on a 2-core CPU takes 2.4 s
-(ball) to about 9 s (pot1) a step, so a line every 100 steps alone would leave a user four to
-fifteen minutes without a word."""
+"""The longest a fit goes without a progress line: on a 2-core CPU the paper preset took 2.4 s a
+step on ball alone and 24-31 s on pot1 beside other work (2026-12-03), so a line every 100 steps
+alone left a user four minutes to over forty without a word."""
 
 
 class ProgressLog(L.Callback):
