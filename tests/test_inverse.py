@@ -21,7 +21,7 @@ from unps.fit import fit
 from unps.inverse.pixels import NOISE_LIMIT
 from unps.inverse.fit import (FAR_FROM_START_DEG, build_system, distance_from_start, held_from_solve,
                               interreflection_bend, neural_inverse_rendering, solved_per_pixel, unit,
-                              with_surface_continued)
+                              unshaded, with_surface_continued)
 from unps.inverse.settings import InterreflectionModel, Preset
 from unps.inverse.grids import (black_headroom, unclipped, upsample_normals, upsample_with_detail,
                                working_factor)
@@ -700,6 +700,50 @@ def test_pixels_black_in_every_image_get_the_surface_continued(caplog):
     np.testing.assert_allclose(straight.normals[band], expected[band], atol=1e-4)
     assert angular_error(straight.normals[band], continued.normals[band]).mean() > 0.5
 
+
+
+def test_faintly_lit_pixels_get_the_surface_continued_as_black_ones_do(caplog):
+    """An 8-bit sphere with two dim bands: one at 8 levels in 3 of its 12 images (faintly lit:
+    :func:`unps.data.checks.faintly_lit`), one at 8 levels in 9 (lit, if dimly). With
+    ``continue_black`` the faint band's normals are the fitted ones continued across it, and
+    nothing else moves (the dim band, a dark material, is not taken toward the continued surface
+    either: ``continue_held=0``); ``faint_share`` is its share either way."""
+    sphere = render_lambertian("sphere", size=32, n_lights=12, seed=2)
+    images = np.round(sphere.images / sphere.images.max() * 255) / 255
+    columns = np.arange(32)[None, :]
+    faint = sphere.mask & (np.abs(columns - 18) < 3)
+    dim = sphere.mask & (np.abs(columns - 9) < 2)
+    images[:, faint] = np.where(np.arange(12)[:, None, None] < 3, 8 / 255, 0)
+    images[:, dim] = np.where(np.arange(12)[:, None, None] < 9, 8 / 255, 0)
+    dark = sphere.replace(images=images.astype(np.float32), light_intensities=None)   # as captured
+    caplog.set_level("INFO")
+    continued, plain = (tiny_fit(dark, continue_black=black, continue_held=0) for black in (True, False))
+    share = faint.sum() / sphere.mask.sum()
+    assert continued.info["faint_share"] == plain.info["faint_share"] == pytest.approx(share)
+    assert continued.info["black_share"] == 0
+    np.testing.assert_array_equal(continued.normals[~faint], plain.normals[~faint])
+    expected = continue_surface(plain.normals, sphere.mask, faint)
+    np.testing.assert_allclose(continued.normals[faint], expected[faint], atol=1e-4)
+    assert angular_error(continued.normals[faint], plain.normals[faint]).mean() > 1
+    assert "of the object is faintly lit" in caplog.text
+
+
+def test_a_dark_diffuse_material_keeps_its_shading_and_speckle_holds_none():
+    """:func:`unps.inverse.fit.unshaded`: a dark diffuse material quantised to 8 levels under 96
+    lights still follows Lambert's cosine (its faint pixels keep the fit's normals); values at
+    random levels in random images (a dark glossy material's speckle) do not."""
+    rng = np.random.default_rng(0)
+    lights = rng.normal(size=(96, 3))
+    lights[:, 2] = np.abs(lights[:, 2]) + 0.5
+    lights /= np.linalg.norm(lights, axis=1, keepdims=True)
+    normals = rng.normal(size=(200, 3))
+    normals[:, 2] = np.abs(normals[:, 2]) + 1
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    shading = np.clip(lights @ normals.T, 0, None)
+    dark = np.round(shading / shading.max(0) * 8) / 255
+    speckle = np.where(rng.random((96, 200)) < 0.2, rng.integers(1, 9, (96, 200)), 0) / 255
+    assert not unshaded(dark, lights).any()
+    assert unshaded(speckle, lights).mean() > 0.9
 
 def test_a_fit_on_a_coarser_grid_solves_each_pixel_of_the_subject(caplog):
     """A 40×40 Lambertian sphere fitted on a ×2 grid: each pixel's normal solved from its own

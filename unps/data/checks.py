@@ -28,6 +28,8 @@ MIN_SPAN = 1e-3         # σ3/σ1 below which the lights do not span 3D at all
 TOP_LEVEL = 1 - 1e-5     # a value this close to its channel's maximum sits at the top level (closer
                          # than one 16-bit level, looser than float32 rounding after dividing by intensities)
 FIRST_LEVEL_AT_MOST = 2 / 255     # above an 8-bit file's first level (1/255 read as round, 1.5/255 as floor)
+FAINT_LEVELS = 10       # a pixel none of whose values passes this many first levels …
+FAINT_SHARE = 0.5       # … and at most this share of whose images hold more than the first: faintly lit
 MIN_CLIPPED_VALUES = 8   # a top level held by this many values is a clipping plateau, not one bright pixel
 CLIPPED_WARNING = 0.02  # share of the object's values at the top level that warns
 DARK_WARNING = 0.5      # share of the object's values that are exactly 0 that warns
@@ -138,6 +140,44 @@ def black_everywhere(images: np.ndarray, mask: np.ndarray, levels: int = 2) -> n
     peak[mask] = values.max(axis=(0, 2))
     return mask & (peak <= levels * first * (1 + 1e-4))
 
+
+
+def faintly_lit(images: np.ndarray, mask: np.ndarray, levels: int = FAINT_LEVELS,
+                share: float = FAINT_SHARE) -> np.ndarray:
+    """Object pixels that are not black in every image (:func:`black_everywhere`) but nearly so:
+    no value above the stack's ``levels`` lowest quantisation levels, and a value above its first
+    level in at most ``share`` of the images. On 8-bit captures of dark glossy materials such
+    pixels hold a few specks of light, and the fit's normals there were 30-60° off; a dark diffuse
+    material's few levels may still hold its shading, which :func:`unps.inverse.fit.unshaded`
+    asks of them before the read-out treats them as black (``experiments/light_benchmark``,
+    "Pixels nearly black").
+
+    Args:
+        images: (n, H, W, 3) as captured; mask: (H, W) bool.
+        levels: the brightest value allowed, in first levels (:func:`first_level`).
+        share: in [0, 1], the most images that may hold more than the first level.
+
+    Returns:
+        (H, W) bool, False off the mask and on the pixels black in every image; all False for a
+        stack with no first level (16-bit captures' noise, float renders).
+
+    Example:
+        >>> images = np.zeros((4, 1, 3, 3))
+        >>> images[0, 0] = 9 / 255               # one image of four at 9 levels: faint
+        >>> images[:3, 0, 1] = 9 / 255           # three of four: lit
+        >>> images[0, 0, 2] = 20 / 255           # one, but at 20 levels: lit
+        >>> images[1:, 0, :, 0] = 1 / 255        # the first level, which counts for none
+        >>> faintly_lit(images, np.ones((1, 3), bool)).astype(int)
+        array([[1, 0, 0]])
+    """
+    first = first_level(images, mask)
+    if first is None:
+        return np.zeros(mask.shape, bool)
+    values = images[:, mask].max(axis=-1)                     # (n, P) the brightest channel
+    above_first = (values > first * (1 + 1e-4)).sum(axis=0)
+    faint = np.zeros(mask.shape, bool)
+    faint[mask] = (values.max(axis=0) <= levels * first * (1 + 1e-4)) & (above_first <= share * len(images))
+    return faint & ~black_everywhere(images, mask)
 
 def first_level(images: np.ndarray, mask: np.ndarray) -> float | None:
     """The stack's first quantisation level: its smallest positive value over the object (1/255

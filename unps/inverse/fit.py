@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from unps.data.checks import black_everywhere, clipped_values, zero_ceiling
+from unps.data.checks import (FAINT_LEVELS, FAINT_SHARE, black_everywhere, clipped_values, faintly_lit,
+                               zero_ceiling)
 from unps.data.estimate import Estimate, Rendering
 from unps.data.subject import Subject
 from unps.device import native_bfloat16, resolve_device
@@ -32,7 +33,7 @@ from unps.geometry import continue_surface
 from unps.inverse.control import fingerprint, train
 from unps.inverse.grids import (black_headroom, on_subject_grid, unclipped, upsample_map,
                                upsample_with_detail, working_factor)
-from unps.inverse.highlights import highlight_normals
+from unps.inverse.highlights import highlight_normals, lambertian_misfit
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet
 from unps.inverse.pixels import NOISE_LIMIT, neighbour_pairs, noise_level, refine_pixel_normals
@@ -49,6 +50,12 @@ log = logging.getLogger(__name__)
 CROP_MARGIN = 4   # pixels of background kept around the object so convolutions see its edge
 HELD_FROM_SOLVE = 0.5   # a pixel held this hard toward N_init keeps the upsampled fit (held_from_solve)
 FAR_FROM_START_DEG = 20.0   # a fit that ends this far from its start, on average, is reported
+
+
+FAINT_MISFIT = 0.3
+"""The Lambertian misfit above which a faintly lit pixel's values hold no shading (:func:`unshaded`).
+Without the test DiLiGenT's pot1 lost 0.8° on its dark glaze; at 0.3 it loses 0.06°, and the light
+benchmark keeps its gain (``experiments/light_benchmark``, "Pixels nearly black")."""
 
 
 def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, preset: Preset,
@@ -85,6 +92,7 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
     observed = cropped.observed_images()
     clipped = clipped_values(observed, cropped.mask)
     black = black_everywhere(observed, cropped.mask)
+    faint = faintly_lit(observed, cropped.mask)
     ceiling = zero_ceiling(observed, cropped.mask) if schedule.censor_black else None
     headroom = (None if ceiling is None else
                 black_headroom(observed, cropped.mask, factor, ceiling, cropped.light_intensities))
@@ -141,14 +149,18 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
             highlight_share = float(highlit.sum() / cropped.mask.sum())
         none = np.zeros_like(black)
         continuing = held is not None and preset.continue_held > 0
-        unlit_held = held & cropped.mask & ~highlit & ~black if continuing else none
+        faint &= ~highlit
+        if faint.any():
+            faint[faint] = unshaded(cropped.images[:, faint].mean(-1) / scales[:, None], directions)
+        unlit_held = held & cropped.mask & ~highlit & ~black & ~faint if continuing else none
         held_share = float(unlit_held.sum() / cropped.mask.sum()) if continuing else None
         if unlit_held.any():
             log.info("%.1f%% of the object is of a dark material the fit held and no highlight lights: "
                      "its normals are taken %.0f%% of the way to the surface continued from the pixels "
                      "around it (preset.continue_held)", 100 * held_share, 100 * preset.continue_held)
-        normals = with_surface_continued(normals, cropped.mask, black if preset.continue_black else none,
-                                         unlit_held, preset.continue_held, preset.continue_outline)
+        unlit = black | faint if preset.continue_black else none
+        normals = with_surface_continued(normals, cropped.mask, unlit, unlit_held, preset.continue_held,
+                                         preset.continue_outline)
         normals, albedo = on_subject_grid(normals, cropped, subject, directions, scales)
     black_share = float(black.sum() / cropped.mask.sum())
     if black.any():
@@ -156,6 +168,14 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
                  "levels): its normals are %s", 100 * black_share,
                  "the surface continued from the pixels around it" if preset.continue_black else
                  "the normal network's guess (preset.continue_black=false)")
+    faint_share = float(faint.sum() / cropped.mask.sum())
+    if faint.any():
+        log.info("%.1f%% of the object is faintly lit (no value above its %d lowest levels, more than the "
+                 "first in at most %.0f%% of the images, not following Lambert's cosine) and no "
+                 "highlight lights it: its normals are %s",
+                 100 * faint_share, FAINT_LEVELS, 100 * FAINT_SHARE,
+                 "the surface continued from the pixels around it" if preset.continue_black else
+                 "the fit's (preset.continue_black=false)")
     if bend is not None:
         log.info("interreflections bend the rendered normals by %.2f° on average (%.2f° at most)",
                  bend["mean"], bend["max"])
@@ -166,7 +186,8 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
             "interreflection": interreflection.enabled,
             "facet_downsample": solver.factor if solver else None,
             "interreflection_bend_deg": bend["mean"] if bend else None, "moved_from_start_deg": moved,
-            "black_share": black_share, "image_noise": image_noise, "highlight_share": highlight_share,
+            "black_share": black_share, "faint_share": faint_share, "image_noise": image_noise,
+            "highlight_share": highlight_share,
             "dark_share": dark_share, "continued_held_share": held_share, "censored_share": censored_share}
     rendering = Rendering(work.mask, work.images, rendering["reconstruction"], rendering["reflectance"])
     return Estimate(normals, albedo, light_directions=directions if refine_lights else None,
@@ -266,6 +287,21 @@ def with_highlights(cropped: Subject, normals: np.ndarray, directions: np.ndarra
     highlit = np.zeros_like(mask)
     highlit[mask] = lit
     return shown, highlit
+
+
+def unshaded(shading: np.ndarray, lights: np.ndarray) -> np.ndarray:
+    """(P,) bool, the pixels whose values do not follow Lambert's cosine: the relative residual of
+    their Lambertian fit above :data:`FAINT_MISFIT` (:func:`unps.inverse.highlights.lambertian_misfit`),
+    or too few lit values to tell. A dark diffuse material's few levels
+    still carry its shading, and the fit reads it (DiLiGenT pot1's dark glaze: 11.5° where the
+    misfit is under 0.2); a dark glossy one's speckle does not (the light benchmark's dark metals
+    and phenolics: 20-60°, their misfit above 0.2).
+
+    Args:
+        shading: (n, P) faintly lit pixels' values (channels averaged) divided by the light
+            intensities; lights: (n, 3) unit directions.
+    """
+    return lambertian_misfit(shading, lights) > FAINT_MISFIT
 
 
 def with_surface_continued(normals: np.ndarray, mask: np.ndarray, black: np.ndarray, held: np.ndarray,

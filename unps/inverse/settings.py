@@ -33,7 +33,9 @@ class Preset:
         cast_shadows: beyond the paper, render the shadows that the fitted surface casts, from its
             depth at each update (:func:`unps.inverse.system.visibility`).
         continue_black: beyond the paper, the read-out's normals of pixels black in every image
-            (:func:`unps.data.checks.black_everywhere`: the images hold no shading there) are
+            (:func:`unps.data.checks.black_everywhere`: the images hold no shading there), and of
+            those nearly so whose few values do not follow Lambert's cosine and that no highlight
+            lights (:func:`unps.data.checks.faintly_lit`, :func:`unps.inverse.fit.unshaded`), are
             those of the surface continued from the pixels around them
             (:func:`unps.geometry.continue_surface`), not the normal network's guess.
         continue_held: beyond the paper, the read-out's normals of the pixels of a dark material
