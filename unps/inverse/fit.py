@@ -292,10 +292,9 @@ def with_highlights(cropped: Subject, normals: np.ndarray, directions: np.ndarra
 def unshaded(shading: np.ndarray, lights: np.ndarray) -> np.ndarray:
     """(P,) bool, the pixels whose values do not follow Lambert's cosine: the relative residual of
     their Lambertian fit above :data:`FAINT_MISFIT` (:func:`unps.inverse.highlights.lambertian_misfit`),
-    or too few lit values to tell. A dark diffuse material's few levels
-    still carry its shading, and the fit reads it (DiLiGenT pot1's dark glaze: 11.5° where the
-    misfit is under 0.2); a dark glossy one's speckle does not (the light benchmark's dark metals
-    and phenolics: 20-60°, their misfit above 0.2).
+    or too few lit values to tell. A dark diffuse material's few levels still carry its shading,
+    and the fit reads it (DiLiGenT pot1's dark glaze); a dark glossy one's speckle does not (the
+    light benchmark's dark metals and phenolics, ``experiments/light_benchmark/faint_pixels.txt``).
 
     Args:
         shading: (n, P) faintly lit pixels' values (channels averaged) divided by the light
