@@ -54,8 +54,8 @@ FAR_FROM_START_DEG = 20.0   # a fit that ends this far from its start, on averag
 
 FAINT_MISFIT = 0.3
 """The Lambertian misfit above which a faintly lit pixel's values hold no shading (:func:`unshaded`).
-Without the test DiLiGenT's pot1 lost 0.8° on its dark glaze; at 0.3 it loses 0.06°, and the light
-benchmark keeps its gain (``experiments/light_benchmark``, "Pixels nearly black")."""
+Without the test DiLiGenT's pot1 lost most of a degree on its dark glaze; at 0.3 it loses 0.06°,
+and the light benchmark keeps its gain (``experiments/light_benchmark``, "Pixels nearly black")."""
 
 
 def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, preset: Preset,
