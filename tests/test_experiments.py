@@ -1269,3 +1269,23 @@ def test_large_capture_writes_the_ball_enlarged_unclipped_with_its_lights(tmp_pa
             study.main([*bad, "--out", str(tmp_path / "out")])
         assert says in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+    run = study.run_folder(tmp_path, "ball-12-x4", ["light=gt", "subject.root=/a/b"])
+    assert run == tmp_path / "run-ball-12-x4-light_gt-subject.root__a_b"      # a Hydra value: no '='
+
+
+def test_start_checks_prints_each_checks_peak_memory_time_and_finding(capsys):
+    """The drawn dark 8-bit stack has black, nearly black and clipped pixels for the checks to find,
+    and each check's line names what it found."""
+    study = load_script("speed_start_checks", "experiments/speed/start_checks.py")
+    stack, mask = study.dark_capture(6, 0.01)
+    assert stack.shape == (6, 100, 100, 3) and stack.dtype == np.float32 and mask.mean() == 0.9
+    np.testing.assert_array_equal(np.round(stack * 255), stack * 255)
+    study.main(["--images", "6", "--megapixels", "0.01"])
+    printed = capsys.readouterr().out
+    lines = {line.split("  ")[0].strip(): line for line in printed.splitlines()}
+    for check in ("clipped_values", "value_levels", "black_everywhere", "faintly_lit", "zero_ceiling",
+                  "black_headroom (×4 grid)"):
+        assert check in lines, printed
+    assert "0.50/255" in lines["zero_ceiling"]
+    for check in ("black_everywhere", "faintly_lit"):
+        assert "0.00% of the object" not in lines[check], printed

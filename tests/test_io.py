@@ -6,10 +6,13 @@ import numpy as np
 import pytest
 import scipy.io
 
-from unps.data.checks import black_everywhere
+from unps.data.checks import (FAINT_LEVELS, FAINT_SHARE, MIN_CLIPPED_VALUES, TOP_LEVEL, black_everywhere,
+                              clipped_values, faintly_lit, first_level, value_levels, zero_ceiling)
 from unps.data.diligent import read_diligent, read_folder
 from unps.data.writer import write_diligent
 from unps.errors import InputError
+from unps.grid import block_mean
+from unps.inverse.grids import MOSTLY_ZERO, black_headroom
 from unps.io.files import atomic_path
 from unps.io.images import read_image, read_mask, srgb_to_linear
 
@@ -274,3 +277,46 @@ def test_black_in_every_image_means_the_stacks_two_lowest_levels(tmp_path, dtype
     np.testing.assert_array_equal(black_everywhere(np.stack(stack), mask)[0], np.array(black, bool))
     coarse = np.full((2, 1, 5, 3), 10 / 255)                      # no value below level 10: can't tell
     assert not black_everywhere(coarse, mask).any()
+
+
+def test_the_checks_read_image_by_image_what_the_whole_stack_says():
+    """Each check walks the stack one image at a time (no copy of it); what it finds is what the
+    definitions say of the whole stack at once: clipping plateaus per channel, black and nearly
+    black pixels, the first levels, the headroom of values read as 0."""
+    rng = np.random.default_rng(3)
+    albedo = rng.random((40, 50, 1)) ** 4
+    stack = np.floor(np.minimum(rng.gamma(0.3, 20, (24, 40, 50, 3)) * albedo * 4, 200)) / 255
+    stack[..., 2] *= 0.9                      # blue's plateau lower: each channel has its own top
+    stack[3] = 0                              # an image black everywhere
+    mask = rng.random((40, 50)) > 0.2
+    values = stack[:, mask]                                            # (n, P, 3) the whole stack
+    first = values[values > 0].min()
+    tops = values.max(axis=(0, 1))
+    at_top = values >= TOP_LEVEL * tops
+    clipped = np.zeros(stack.shape[:3], bool)
+    clipped[:, mask] = (at_top & (at_top.sum(axis=(0, 1)) >= MIN_CLIPPED_VALUES)).any(-1)
+    peak, lit = values.max(axis=(0, 2)), (values.max(-1) > first * (1 + 1e-4)).sum(0)
+    black = np.zeros(mask.shape, bool)
+    black[mask] = peak <= 2 * first * (1 + 1e-4)
+    faint = np.zeros(mask.shape, bool)
+    faint[mask] = (peak <= FAINT_LEVELS * first * (1 + 1e-4)) & (lit <= FAINT_SHARE * len(stack))
+    faint &= ~black
+    second = values[values > first * (1 + 1e-3)].min()
+    assert 0 < clipped.mean() and 0.1 < black[mask].mean() < 0.9 and 0.05 < faint[mask].mean() < 0.9
+
+    assert first_level(stack, mask) == first
+    assert zero_ceiling(stack, mask) == first - min(second - first, first) / 2
+    np.testing.assert_array_equal(clipped_values(stack, mask), clipped)
+    np.testing.assert_array_equal(black_everywhere(stack, mask), black)
+    np.testing.assert_array_equal(faintly_lit(stack, mask), faint)
+    shares = value_levels(stack, mask)
+    np.testing.assert_array_equal(shares[0], clipped[:, mask].mean(1))
+    np.testing.assert_array_equal(shares[1], (values == 0).all(-1).mean(1))
+    zeros = (stack == 0) & mask[None, ..., None]
+    zeros &= (zeros.all(-1).mean(0) <= MOSTLY_ZERO)[None, ..., None]
+    intensities = rng.random((24, 3)) + 0.5
+    for factor in (1, 3):
+        share = zeros if factor == 1 else np.stack([block_mean(z, mask, factor)[0] for z in zeros])
+        np.testing.assert_allclose(black_headroom(stack, mask, factor, 0.5 / 255, intensities),
+                                   share * 0.5 / 255 / intensities[:, None, None], rtol=1e-6)
+    assert black_headroom(stack + 1 / 255, mask, 3, 0.5 / 255, None) is None

@@ -129,3 +129,24 @@ def test_prepare_order_and_refusing_to_drop_everything():
     assert s.n_images == 2 and s.resolution == (2, 2) and s.frame == Frame((8, 8), 2, 2, 2)
     with pytest.raises(InputError, match="drop removes all 4 images"):
         prepare(make(), drop=["0-3"])
+
+
+def test_a_subject_kept_without_its_pixels_keeps_its_lights_and_holds_no_image():
+    """What ``python -m unps.fit`` keeps of the subject as read once the method has its own images:
+    its lights, mask and count of images, and no pixel values (a view of one zero)."""
+    from unps.pipeline.run import without_pixels
+
+    subject = make(light_intensities=np.full((4, 3), 2.0, np.float32))
+    kept = without_pixels(subject)
+    assert kept.n_images == 4 and kept.resolution == subject.resolution
+    np.testing.assert_array_equal(kept.light_directions, subject.light_directions)
+    np.testing.assert_array_equal(kept.light_intensities, subject.light_intensities)
+    assert kept.images.strides == (0, 0, 0, 0) and not kept.images.any()
+    assert subject.images.all()                                # the subject as read is untouched
+
+
+def test_a_nan_in_any_image_is_refused():
+    images = np.ones((4, 6, 5, 3), np.float32)
+    images[3, 5, 4, 2] = np.nan
+    with pytest.raises(InputError, match="images contain NaN or Inf"):
+        make(images=images)

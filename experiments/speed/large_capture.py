@@ -58,6 +58,13 @@ def write_capture(diligent: Path, images: int, scale: int, folder: Path) -> tupl
     return width, height
 
 
+def run_folder(out: Path, capture: str, overrides: list[str]) -> Path:
+    """The fit's folder under ``out``, named by the capture and the overrides, with neither '=' nor
+    '/' in it: it is passed to the fit as ``hydra.run.dir=…``, whose value may hold no '='."""
+    label = "-".join(override.replace("=", "_").replace("/", "_") for override in overrides)
+    return out / ("run-" + capture + ("-" + label if label else ""))
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--diligent", type=Path, default=DILIGENT)
@@ -77,7 +84,7 @@ def main(argv=None) -> None:
     if not capture.is_dir():
         width, height = write_capture(args.diligent, args.images, args.scale, capture)
         print(f"wrote {capture} ({args.images} images, {width}×{height})", flush=True)
-    run = args.out / ("run-" + capture.name + ("-" + "-".join(args.overrides) if args.overrides else ""))
+    run = run_folder(args.out, capture.name, args.overrides)
     shutil.rmtree(run, ignore_errors=True)      # a run left there would resume, not be measured
     command = [sys.executable, "-m", "unps.fit", "subject=folder", f"subject.root={capture}",
                *args.overrides, f"hydra.run.dir={run}"]

@@ -87,7 +87,8 @@ def auto_mask(images: np.ndarray) -> AutoMask:
     if scale <= 0:
         raise InputError("subject.mask=auto: the images are black, so nothing shows where the "
                          "object is; give a mask.png")
-    low, high = np.percentile(gray / scale, [5, 95], axis=0)
+    gray /= scale                               # in place: a 20 MP stack's gray is a gigabyte
+    low, high = np.percentile(gray, [5, 95], axis=0)
     spread = high - low
     if not np.any(spread > FLOOR):
         raise InputError("subject.mask=auto: no pixel changes with the light; give a mask.png")

@@ -28,6 +28,7 @@ MIN_SPAN = 1e-3         # σ3/σ1 below which the lights do not span 3D at all
 TOP_LEVEL = 1 - 1e-5     # a value this close to its channel's maximum sits at the top level (closer
                          # than one 16-bit level, looser than float32 rounding after dividing by intensities)
 FIRST_LEVEL_AT_MOST = 2 / 255     # above an 8-bit file's first level (1/255 read as round, 1.5/255 as floor)
+BLACK_LEVELS = 2        # a pixel none of whose values passes this many first levels is black
 FAINT_LEVELS = 10       # a pixel none of whose values passes this many first levels …
 FAINT_SHARE = 0.5       # … and at most this share of whose images hold more than the first: faintly lit
 MIN_CLIPPED_VALUES = 8   # a top level held by this many values is a clipping plateau, not one bright pixel
@@ -98,20 +99,25 @@ def clipped_values(images: np.ndarray, mask: np.ndarray) -> np.ndarray:
                [0, 0, 0, 0, 0, 0, 0, 0, 0, 0]])
     """
     clipped = np.zeros(images.shape[:3], bool)
-    values = images[:, mask]                                   # (n, m, 3)
-    if values.size == 0:
+    if not mask.any():
         return clipped
-    hit = np.zeros(values.shape[:2], bool)
-    for channel in np.moveaxis(values, -1, 0):                 # channel by channel: reductions over
-        top = channel.max()                                    # the last, 3-long axis are slow
-        at_top = channel >= TOP_LEVEL * top
-        if top > 0 and np.count_nonzero(at_top) >= MIN_CLIPPED_VALUES:
-            hit |= at_top
-    clipped[:, mask] = hit
+    channels = range(images.shape[-1])                         # channel by channel: reductions over
+    top = np.zeros(len(channels))                              # the last, 3-long axis are slow
+    for values in _object_values(images, mask):
+        top = np.maximum(top, [values[:, c].max() for c in channels])
+    at_top = np.zeros(len(channels), int)
+    for values in _object_values(images, mask):
+        at_top += [np.count_nonzero(values[:, c] >= TOP_LEVEL * top[c]) for c in channels]
+    plateaus = [c for c in channels if top[c] > 0 and at_top[c] >= MIN_CLIPPED_VALUES]
+    if plateaus:
+        index = np.flatnonzero(mask)
+        for image_clipped, values in zip(clipped, _object_values(images, mask)):
+            image_clipped.reshape(-1)[index] = np.logical_or.reduce(
+                [values[:, c] >= TOP_LEVEL * top[c] for c in plateaus])
     return clipped
 
 
-def black_everywhere(images: np.ndarray, mask: np.ndarray, levels: int = 2) -> np.ndarray:
+def black_everywhere(images: np.ndarray, mask: np.ndarray, levels: int = BLACK_LEVELS) -> np.ndarray:
     """Object pixels that are black in every image: no value above the stack's ``levels`` lowest
     quantisation levels, in any image or channel. Such a pixel holds no shading, so any normal
     explains it.
@@ -133,13 +139,10 @@ def black_everywhere(images: np.ndarray, mask: np.ndarray, levels: int = 2) -> n
         array([[1, 1, 1, 0]])
     """
     first = first_level(images, mask)
-    if first is None:
-        return np.zeros(mask.shape, bool)
-    values = images[:, mask]
-    peak = np.zeros(mask.shape, images.dtype)
-    peak[mask] = values.max(axis=(0, 2))
-    return mask & (peak <= levels * first * (1 + 1e-4))
-
+    black = np.zeros(mask.shape, bool)
+    if first is not None:
+        black[mask] = _peak_and_lit_count(images, mask, first)[0] <= levels * first * (1 + 1e-4)
+    return black
 
 
 def faintly_lit(images: np.ndarray, mask: np.ndarray, levels: int = FAINT_LEVELS,
@@ -171,13 +174,35 @@ def faintly_lit(images: np.ndarray, mask: np.ndarray, levels: int = FAINT_LEVELS
         array([[1, 0, 0]])
     """
     first = first_level(images, mask)
-    if first is None:
-        return np.zeros(mask.shape, bool)
-    values = images[:, mask].max(axis=-1)                     # (n, P) the brightest channel
-    above_first = (values > first * (1 + 1e-4)).sum(axis=0)
     faint = np.zeros(mask.shape, bool)
-    faint[mask] = (values.max(axis=0) <= levels * first * (1 + 1e-4)) & (above_first <= share * len(images))
-    return faint & ~black_everywhere(images, mask)
+    if first is not None:
+        peak, lit = _peak_and_lit_count(images, mask, first)
+        faint[mask] = ((peak > BLACK_LEVELS * first * (1 + 1e-4)) & (peak <= levels * first * (1 + 1e-4))
+                       & (lit <= share * len(images)))
+    return faint
+
+
+def _peak_and_lit_count(images: np.ndarray, mask: np.ndarray, first: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per object pixel, its brightest value over the images and channels, and the number of
+    images in which a channel is above the ``first`` level: (P,) each, in the order of
+    ``images[:, mask]``. Image by image, so that no copy of the stack is made."""
+    peak = np.zeros(int(mask.sum()), images.dtype)
+    lit = np.zeros(int(mask.sum()), np.int32)
+    for values in _object_values(images, mask):
+        brightest = np.maximum(np.maximum(values[:, 0], values[:, 1]), values[:, 2])  # not .max(-1): slow
+        np.maximum(peak, brightest, out=peak)
+        lit += brightest > first * (1 + 1e-4)
+    return peak, lit
+
+
+def _object_values(images: np.ndarray, mask: np.ndarray) -> Iterator[np.ndarray]:
+    """Each image's (P, 3) values on the object, in the order of ``images[:, mask]``, one image at
+    a time, so that no copy of the stack is made (``np.take`` on flat indices: faster than
+    indexing by the mask)."""
+    index = np.flatnonzero(mask)
+    for image in images:
+        yield np.take(image.reshape(-1, image.shape[-1]), index, axis=0)
+
 
 def first_level(images: np.ndarray, mask: np.ndarray) -> float | None:
     """The stack's first quantisation level: its smallest positive value over the object (1/255
@@ -193,10 +218,14 @@ def first_level(images: np.ndarray, mask: np.ndarray) -> float | None:
         >>> round(first_level(images, np.ones((1, 4), bool)) * 255, 6)
         1.0
     """
-    values = images[:, mask]
-    positive = values[values > 0]
-    first = float(positive.min()) if positive.size else 0.0
-    return None if first == 0.0 or first > FIRST_LEVEL_AT_MOST else first
+    first = min((_smallest_above(values, 0.0) for values in _object_values(images, mask)), default=np.inf)
+    return None if not np.isfinite(first) or first > FIRST_LEVEL_AT_MOST else first
+
+
+def _smallest_above(values: np.ndarray, floor: float) -> float:
+    """The smallest of ``values`` above ``floor``; ∞ where none is."""
+    above = values[values > floor]
+    return float(above.min()) if above.size else np.inf
 
 
 def zero_ceiling(images: np.ndarray, mask: np.ndarray) -> float | None:
@@ -218,9 +247,10 @@ def zero_ceiling(images: np.ndarray, mask: np.ndarray) -> float | None:
     first = first_level(images, mask)
     if first is None:
         return None
-    values = images[:, mask]
-    above = values[values > first * (1 + 1e-3)]             # past float rounding of the first level
-    step = min(float(above.min()) - first, first) if above.size else first
+    past_first = first * (1 + 1e-3)                           # past float rounding of the first level
+    second = min((_smallest_above(values, past_first) for values in _object_values(images, mask)),
+                 default=np.inf)
+    step = min(second - first, first)
     return first - step / 2
 
 
@@ -234,11 +264,11 @@ def value_levels(images: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.n
     Returns:
         clipped, black: (n,) shares in [0, 1].
     """
-    values = images[:, mask]                                   # (n, m, 3)
-    if float(values.max()) <= 0:
-        return np.zeros(len(images)), np.ones(len(images))
+    black = np.array([np.logical_and.reduce([values[:, c] <= 0 for c in range(values.shape[-1])]).mean()
+                      for values in _object_values(images, mask)])
+    if (black == 1).all():
+        return np.zeros(len(images)), black
     clipped = clipped_values(images, mask)[:, mask].mean(1)
-    black = ((values[..., 0] <= 0) & (values[..., 1] <= 0) & (values[..., 2] <= 0)).mean(1)
     return clipped, black
 
 

@@ -117,20 +117,21 @@ def read_layout(root: Path, filenames: list[str], mask_file: Path, require_mask:
     if require_mask and not mask_file.is_file():
         raise InputError(f"{mask_file}: missing")
 
+    images = None                             # filled image by image: the stack is the only copy
+    read = partial(read_image, quantization=quantization)
     with ThreadPoolExecutor(os.cpu_count()) as pool:
-        images = list(pool.map(partial(read_image, quantization=quantization), paths))
-    size = images[0].shape
-    for p, im in zip(paths, images):
-        if im.shape != size:
-            raise InputError(f"{p}: image is {im.shape[1]}×{im.shape[0]}, but {paths[0].name} "
-                             f"is {size[1]}×{size[0]}; all images must have one size")
-        if not np.isfinite(im).all():
-            row, col = np.argwhere(~np.isfinite(im))[0][:2] + 1
-            raise InputError(f"{p}: contains NaN or Inf (first at row {row}, column {col}, "
-                             f"counting from 1)")
-    images = np.stack(images)
-    if encoding == "srgb":
-        images = srgb_to_linear(images)
+        for k, (p, im) in enumerate(zip(paths, pool.map(read, paths))):
+            if images is None:
+                images = np.empty((len(paths), *im.shape), np.float32)
+            size = images.shape[1:]
+            if im.shape != size:
+                raise InputError(f"{p}: image is {im.shape[1]}×{im.shape[0]}, but {paths[0].name} "
+                                 f"is {size[1]}×{size[0]}; all images must have one size")
+            if not np.isfinite(im).all():
+                row, col = np.argwhere(~np.isfinite(im))[0][:2] + 1
+                raise InputError(f"{p}: contains NaN or Inf (first at row {row}, column {col}, "
+                                 f"counting from 1)")
+            images[k] = srgb_to_linear(im) if encoding == "srgb" else im
     if intensities is not None:
         images /= intensities[:, None, None, :]
 

@@ -55,7 +55,7 @@ class Subject:
         if n == 0:
             raise InputError(f"{source}: no images")
         images = images.astype(np.float32, copy=False)
-        if not np.isfinite(images).all():
+        if not all(np.isfinite(image).all() for image in images):   # image by image: no stack-sized mask
             raise InputError(f"{source}: images contain NaN or Inf")
         self._set("images", images)
 

@@ -85,17 +85,20 @@ def black_headroom(observed: np.ndarray, mask: np.ndarray, factor: int, ceiling:
         ceiling: the light below which a value reads 0, in the units of ``observed``.
         intensities: (n, 3) the lights' RGB intensities the images are divided by; None: 1.
     """
-    zeros = (observed == 0) & mask[None, :, :, None]
-    zeros &= (zeros.all(-1).mean(0) <= MOSTLY_ZERO)[None, :, :, None]
-    if not zeros.any():
-        return None
-    share = zeros.astype(np.float32)
-    if factor > 1:
-        share = np.stack([block_mean(z, mask, factor)[0] for z in share]).astype(np.float32)
+    all_zero = np.zeros(mask.shape, np.int32)                 # image by image: no copy of the stack
+    for image in observed:
+        all_zero += (image[..., 0] == 0) & (image[..., 1] == 0) & (image[..., 2] == 0)
+    bounded = mask & (all_zero <= MOSTLY_ZERO * len(observed))
     per_value = np.full((len(observed), 3), ceiling, np.float32)
     if intensities is not None:
         per_value = per_value / np.asarray(intensities, np.float32)
-    return share * per_value[:, None, None, :]
+    headroom, any_zero = [], False
+    for image, ceilings in zip(observed, per_value):
+        zeros = (image == 0) & bounded[..., None]
+        any_zero = any_zero or bool(zeros.any())
+        share = zeros if factor == 1 else block_mean(zeros, mask, factor)[0]
+        headroom.append(share.astype(np.float32) * ceilings)
+    return np.stack(headroom) if any_zero else None
 
 
 def upsample_with_detail(normals: np.ndarray, coarse_init: np.ndarray, fine_init: np.ndarray,

@@ -51,16 +51,21 @@ def network_input(images: np.ndarray, mask: np.ndarray, resolution: int, fill: f
     half = (max(rows.max() - rows.min(), cols.max() - cols.min()) / 2 + 1) / fill
     top, left = int(np.floor(centre_r - half)), int(np.floor(centre_c - half))
     side = int(np.ceil(2 * half))
-    pad = [(max(0, -top), max(0, top + side - mask.shape[0])),
-           (max(0, -left), max(0, left + side - mask.shape[1]))]
-    window = (slice(top + pad[0][0], top + pad[0][0] + side),
-              slice(left + pad[1][0], left + pad[1][0] + side))
-    m = np.pad(mask, pad)[window].astype(np.float32)
-    x = np.pad(images * mask[..., None], [(0, 0), *pad, (0, 0)])[:, window[0], window[1]]
-    x = torch.as_tensor(np.ascontiguousarray(x)).permute(0, 3, 1, 2)
-    x = F.interpolate(x, size=(resolution, resolution), mode="area")
-    m = F.interpolate(torch.as_tensor(m)[None, None], size=(resolution, resolution), mode="area")
+    size = (resolution, resolution)
+    m = F.interpolate(_square(mask[..., None], top, left, side), size, mode="area")
+    x = torch.cat([F.interpolate(_square(image * mask[..., None], top, left, side), size, mode="area")
+                   for image in images])                      # image by image: no copy of the stack
     return x[None], (m > 0.5).float()
+
+
+def _square(values: np.ndarray, top: int, left: int, side: int) -> torch.Tensor:
+    """(1, C, side, side) float32, channels last in memory: the window of (H, W, C) ``values``
+    whose top left corner is (``top``, ``left``), zero where it lies beyond them."""
+    square = np.zeros((side, side, values.shape[-1]), np.float32)
+    r0, r1 = max(top, 0), min(top + side, values.shape[0])
+    c0, c1 = max(left, 0), min(left + side, values.shape[1])
+    square[r0 - top:r1 - top, c0 - left:c1 - left] = values[r0:r1, c0:c1]
+    return torch.as_tensor(square)[None].permute(0, 3, 1, 2)
 
 
 def network_lights(subject: Subject, checkpoint: str | None = None, soft_decode: bool = True,

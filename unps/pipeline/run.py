@@ -17,6 +17,7 @@ from unps.allocator import keep_freed_memory
 from unps.data.checks import check_light_span, collected_warnings, usable_subject
 from unps.data.lights import Verdict
 from unps.data.prepare import add_noise
+from unps.data.subject import Subject
 from unps.device import describe, peak_memory_gb, resolve_device
 from unps.errors import InputError
 from unps.geometry import integrate_normals
@@ -90,6 +91,14 @@ def fit(cfg: DictConfig) -> dict:
         return run_fit(cfg, seconds, warnings)
 
 
+def without_pixels(subject: Subject) -> Subject:
+    """``subject`` with its images replaced by zeros that take no memory (a broadcast view of one
+    value), all else kept: what the run still needs of the subject as read once the method has its
+    own copy of the images divided by other lights is its lights, which the lights it ends with are
+    compared to (the images of 12 photographs of 20 MP are 2.9 GB)."""
+    return subject.replace(images=np.broadcast_to(np.zeros((), np.float32), subject.images.shape))
+
+
 def run_fit(cfg: DictConfig, seconds: dict[str, float], warnings: list[str]) -> dict:
     """:func:`fit`'s body; ``seconds`` and ``warnings`` fill as it goes."""
     from lightning import seed_everything
@@ -123,6 +132,7 @@ def run_fit(cfg: DictConfig, seconds: dict[str, float], warnings: list[str]) -> 
     if lights.source != "gt":
         light_metrics = light_errors(lights, subject)
         subject = with_lights(subject, lights)
+        original = without_pixels(original)
     h, w = subject.resolution
     log.info("%s: %d images, %d×%d pixels (%d on the object), read in %.1f s; lights: %s; "
              "method: %s; device %s, %d torch threads (%s)", subject.name, subject.n_images, w, h,
