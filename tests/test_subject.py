@@ -5,8 +5,9 @@ import pytest
 
 from unps.data.prepare import parse_indices, prepare
 from unps.data.subject import Subject
-from unps.grid import Frame
 from unps.errors import InputError
+from unps.grid import Frame
+from unps.pipeline.run import without_pixels
 
 
 def make(n=4, h=6, w=5, **kw):
@@ -134,8 +135,6 @@ def test_prepare_order_and_refusing_to_drop_everything():
 def test_a_subject_kept_without_its_pixels_keeps_its_lights_and_holds_no_image():
     """What ``python -m unps.fit`` keeps of the subject as read once the method has its own images:
     its lights, mask and count of images, and no pixel values (a view of one zero)."""
-    from unps.pipeline.run import without_pixels
-
     subject = make(light_intensities=np.full((4, 3), 2.0, np.float32))
     kept = without_pixels(subject)
     assert kept.n_images == 4 and kept.resolution == subject.resolution
