@@ -97,3 +97,30 @@ def test_a_fit_of_a_dark_glossy_sphere_reads_its_highlights(caplog):
     error = {name: angular_error(e.normals[lit], normals[lit]).mean() for name, e in (("read", read), ("plain", plain))}
     assert error["read"] < 5 < error["plain"]
     assert "lit by a specular highlight" in caplog.text
+
+
+def test_the_fit_held_toward_its_highlights_half_vectors_carries_them_to_its_other_pixels(caplog):
+    """``preset.highlight_hold`` pulls the pixels lit by a highlight toward its half vector in
+    every step: on a dark glossy sphere, with the read-out's own highlights off so that the
+    normals are the fit's, the highlit pixels end nearer the truth than without the pull, and so
+    do the pixels no highlight lights, which share the network with them."""
+    size, lights = 24, cap(96)
+    y, x = (np.mgrid[:size, :size] + 0.5) / size * 2 - 1
+    mask = x ** 2 + y ** 2 < 0.9
+    normals = np.zeros((size, size, 3), np.float32)
+    normals[mask] = unit(np.stack([x[mask], -y[mask], np.sqrt(np.clip(1 - x[mask] ** 2 - y[mask] ** 2, 0, 1))], -1))
+    images = np.zeros((96, size, size, 3), np.float32)
+    images[:, mask] = glossy(normals[mask], lights)[..., None]
+    sphere = Subject("glossy", images, mask, lights.astype(np.float32), normals=normals)
+    caplog.set_level("INFO")
+
+    fits = {hold: tiny_fit(sphere, highlights=False, highlight_hold=hold) for hold in (0.0, 1.0)}
+    _, flagged = highlight_normals(images[:, mask].mean(-1), lights)
+    lit = np.zeros_like(mask)
+    lit[mask] = flagged
+    parts = {"lit": lit, "unlit": mask & ~lit}
+    error = {(hold, name): angular_error(fit.normals[part], normals[part]).mean()
+             for hold, fit in fits.items() for name, part in parts.items()}
+    assert error[1.0, "lit"] < 0.5 * error[0.0, "lit"]
+    assert error[1.0, "unlit"] < error[0.0, "unlit"] - 1
+    assert "pulled toward its half vector in every step" in caplog.text

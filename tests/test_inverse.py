@@ -106,6 +106,7 @@ def test_batch_norm_reads_out_with_the_statistics_it_was_fitted_with():
     ("init", "woodham", "preset.init must be one of robust, least_squares, got 'woodham'"),
     ("residual", "l2", "preset.residual must be one of absolute, sqrt, relative, albedo, got 'l2'"),
     ("dark_hold", -0.1, "preset.dark_hold must be a number >= 0, got -0.1"),
+    ("highlight_hold", "strong", "preset.highlight_hold must be a number >= 0, got 'strong'"),
     ("hold_light_frame", "yes", "preset.hold_light_frame must be true or false, got 'yes'"),
     ("censor_black", 1, "preset.censor_black must be true or false, got 1"),
     ("precision", "16-mixed", "preset.precision must be one of auto, 32-true, bf16-mixed, got '16-mixed'")])

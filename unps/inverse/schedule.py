@@ -45,6 +45,13 @@ class Schedule:
             ``prior_steps`` on the pixels of a dark material, each by its
             :func:`unps.inverse.system.dark_weight`: there the images hardly pin the normals, and
             once the prior ends the reflectance network can explain them with any. 0: off.
+        highlight_hold: beyond the paper, the weight of a pull ‖N_o − h‖² on the working grid's
+            pixels lit by a specular highlight (:func:`unps.inverse.highlights.highlight_normals`),
+            h the half vector of the view and the light of the pixel's brightest image, for every
+            step: the L1 loss takes those images for outliers, and the network shared with the
+            pixels around them carries the half vector to them (1: pinned; the light benchmark's
+            glossy objects, ``experiments/light_benchmark/README.md``, "The fit held to its
+            highlights"). 0: off, as in the paper.
         hold_light_frame: beyond the paper, when the fit learns the lights (``light.refine``), it
             learns no rotation that turns them all together
             (:func:`unps.inverse.system.without_common_rotation`): the frame is the light
@@ -65,6 +72,7 @@ class Schedule:
     residual: str = "absolute"
     censor_black: bool = True
     dark_hold: float = 0.1
+    highlight_hold: float = 1.0
     hold_light_frame: bool = True
 
     def __post_init__(self):
@@ -89,7 +97,7 @@ class Schedule:
         for name in ("hold_light_frame", "censor_black"):
             if not isinstance(getattr(self, name), bool):
                 raise InputError(f"preset.{name} must be true or false, got {getattr(self, name)!r}")
-        for name in ("input_noise_var", "prior_weight", "dark_hold"):
+        for name in ("input_noise_var", "prior_weight", "dark_hold", "highlight_hold"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and value >= 0):
                 raise InputError(f"preset.{name} must be a number >= 0, got {value!r}")

@@ -174,7 +174,10 @@ class InverseRendering(L.LightningModule):
     enough not to keep its errors (shadows and highlights the reflectance maps then explain).
     After it, ``dark_hold``·Σ w‖N_o − N_init‖² / (object pixels) keeps the pixels of a dark
     material near N_init, w their :func:`dark_weight` (beyond the paper): the L1 loss hardly feels
-    their normals, and a network shared with a bright material moves them at will.
+    their normals, and a network shared with a bright material moves them at will. In every step,
+    ``highlight_hold``·Σ‖N_o − h‖² / (object pixels) pulls the pixels lit by a specular highlight
+    toward its half vector h (beyond the paper, :meth:`pull_toward_highlights`): the L1 loss takes
+    their bright images for outliers.
 
     Args:
         normal_net, reflectance_net: the networks.
@@ -196,6 +199,8 @@ class InverseRendering(L.LightningModule):
         albedo: (1, 1, H, W) the initialisation's albedo, for ``preset.residual=albedo`` and the
             hold on dark materials.
         precision: ``bf16-mixed`` runs both networks under bfloat16 autocast (``preset.precision``).
+        highlit: (H, W) long, the image whose light shows each pixel a specular highlight, −1
+            where none does (``preset.highlight_hold``); None: none.
     """
 
     log_every = 10
@@ -207,7 +212,7 @@ class InverseRendering(L.LightningModule):
                  refine_lights: bool = False, true_normals: torch.Tensor | None = None,
                  fingerprint: str = "", usable: torch.Tensor | None = None, shadows: bool = False,
                  albedo: torch.Tensor | None = None, precision: str = "32-true",
-                 headroom: torch.Tensor | None = None):
+                 headroom: torch.Tensor | None = None, highlit: torch.Tensor | None = None):
         super().__init__()
         self.networks_in_bf16 = precision == "bf16-mixed"
         self.normal_net, self.reflectance_net = normal_net, reflectance_net
@@ -235,6 +240,9 @@ class InverseRendering(L.LightningModule):
                              persistent=False)
         self.register_buffer("dark_weight", dark_weight(albedo, self.mask), persistent=False)
         self.holds_dark = schedule.dark_hold > 0 and bool(self.dark_weight.any())
+        highlit = torch.full(mask.shape, -1) if highlit is None else highlit.long()
+        self.register_buffer("highlit", highlit, persistent=False)
+        self.holds_highlights = schedule.highlight_hold > 0 and bool((highlit >= 0).any())
         n = images.shape[0]
         self.light_offsets = torch.nn.Parameter(torch.zeros(n, 3), requires_grad=refine_lights)
         self.light_log_scales = torch.nn.Parameter(torch.zeros(n), requires_grad=refine_lights)
@@ -350,6 +358,10 @@ class InverseRendering(L.LightningModule):
             hold = self.pull_toward_start(out["normals"], self.dark_weight)
             loss = loss + s.dark_hold * hold
             figures["loss/dark_hold"] = hold
+        if self.holds_highlights:
+            hold = self.pull_toward_highlights(out["normals"])
+            loss = loss + s.highlight_hold * hold
+            figures["loss/highlight_hold"] = hold
         self.watch_divergence(loss)
         if self.figures_read():
             for name, value in figures.items():
@@ -374,6 +386,16 @@ class InverseRendering(L.LightningModule):
         """Σ weight·‖N_o − N_init‖² over the pixels, divided by the object's pixel count;
         ``normals`` (1, 3, H, W) N_o, ``weight`` (1, 1, H, W)."""
         return (((normals - self.init_normals) ** 2).sum(1, keepdim=True) * weight).sum() / self.mask.sum()
+
+    def pull_toward_highlights(self, normals: torch.Tensor) -> torch.Tensor:
+        """Σ ‖N_o − h‖² over the pixels lit by a highlight, divided by the object's pixel count;
+        h the half vector of the view (+z) and the current light of the pixel's highlit image
+        (held fixed: the pull moves the normals, not the lights). ``normals`` (1, 3, H, W) N_o."""
+        lit = self.highlit >= 0
+        with torch.no_grad():
+            lights = self.lights()[0][self.highlit[lit]]                              # (P, 3)
+            half = F.normalize(lights + lights.new_tensor([0.0, 0.0, 1.0]), dim=-1)
+        return ((normals[0][:, lit].T - half) ** 2).sum() / self.mask.sum()
 
     def watch_divergence(self, loss: torch.Tensor) -> None:
         """Note the first step whose loss is not finite, and stop the fit there before its next
