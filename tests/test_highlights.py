@@ -73,18 +73,24 @@ def test_sparse_lights_read_no_highlight():
     assert not flagged.any()
 
 
-def test_a_fit_of_a_dark_glossy_sphere_reads_its_highlights(caplog):
-    """A 24×24 sphere of a dark glossy material under 96 lights: the pixels lit by a highlight
-    take its half vector (nearer the truth than the fit), the others keep the fit's normal, and
-    ``highlight_share`` counts them; ``highlights=false`` returns the fit's normals alone."""
-    size, lights = 24, cap(96)
+def glossy_sphere(size: int = 24) -> Subject:
+    """A ``size``² sphere of :func:`glossy`'s dark glossy material under 96 lights of a cap."""
+    lights = cap(96)
     y, x = (np.mgrid[:size, :size] + 0.5) / size * 2 - 1
     mask = x ** 2 + y ** 2 < 0.9
     normals = np.zeros((size, size, 3), np.float32)
     normals[mask] = unit(np.stack([x[mask], -y[mask], np.sqrt(np.clip(1 - x[mask] ** 2 - y[mask] ** 2, 0, 1))], -1))
     images = np.zeros((96, size, size, 3), np.float32)
     images[:, mask] = glossy(normals[mask], lights)[..., None]
-    sphere = Subject("glossy", images, mask, lights.astype(np.float32), normals=normals)
+    return Subject("glossy", images, mask, lights.astype(np.float32), normals=normals)
+
+
+def test_a_fit_of_a_dark_glossy_sphere_reads_its_highlights(caplog):
+    """A 24×24 sphere of a dark glossy material under 96 lights: the pixels lit by a highlight
+    take its half vector (nearer the truth than the fit), the others keep the fit's normal, and
+    ``highlight_share`` counts them; ``highlights=false`` returns the fit's normals alone."""
+    sphere = glossy_sphere()
+    lights, mask, normals, images = sphere.light_directions, sphere.mask, sphere.normals, sphere.images
     caplog.set_level("INFO")
 
     read, plain = tiny_fit(sphere, highlights=True), tiny_fit(sphere, highlights=False)
@@ -104,14 +110,8 @@ def test_the_fit_held_toward_its_highlights_half_vectors_carries_them_to_its_oth
     every step: on a dark glossy sphere, with the read-out's own highlights off so that the
     normals are the fit's, the highlit pixels end nearer the truth than without the pull, and so
     do the pixels no highlight lights, which share the network with them."""
-    size, lights = 24, cap(96)
-    y, x = (np.mgrid[:size, :size] + 0.5) / size * 2 - 1
-    mask = x ** 2 + y ** 2 < 0.9
-    normals = np.zeros((size, size, 3), np.float32)
-    normals[mask] = unit(np.stack([x[mask], -y[mask], np.sqrt(np.clip(1 - x[mask] ** 2 - y[mask] ** 2, 0, 1))], -1))
-    images = np.zeros((96, size, size, 3), np.float32)
-    images[:, mask] = glossy(normals[mask], lights)[..., None]
-    sphere = Subject("glossy", images, mask, lights.astype(np.float32), normals=normals)
+    sphere = glossy_sphere()
+    lights, mask, normals, images = sphere.light_directions, sphere.mask, sphere.normals, sphere.images
     caplog.set_level("INFO")
 
     fits = {hold: tiny_fit(sphere, highlights=False, highlight_hold=hold) for hold in (0.0, 1.0)}
