@@ -234,8 +234,8 @@ def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.n
         held: (H, W) bool, pixels that keep ``normals`` (:func:`held_from_solve`); None: none.
 
     Returns:
-        (H, W, 3) unit normals on the crop's object — pixels the solve leaves out keep
-        ``normals``, and all of them do where the images' noise is above
+        (H, W, 3) unit normals on the crop's object — pixels the solve leaves out (a specular
+        lobe among them) keep ``normals``, and all of them do where the images' noise is above
         :data:`unps.inverse.pixels.NOISE_LIMIT` — and that noise (σ, a share of the images' 99th
         percentile; :func:`unps.inverse.pixels.noise_level`).
     """
@@ -243,7 +243,8 @@ def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.n
     colour = np.stack([upsample_map(r, work_mask, mask.shape, factor)[mask] for r in reflectance])
     colour *= scales[:, None, None]
     images, start, offset = cropped.images[:, mask], normals[mask], interreflected[mask]
-    solved, ok, used = refine_pixel_normals(images, colour, unit(start + offset), directions, usable[:, mask])
+    solved, ok, used, lobed = refine_pixel_normals(images, colour, unit(start + offset), directions,
+                                                   usable[:, mask])
     white = float(np.percentile(images, 99))
     noise = noise_level(images, colour, solved, directions, used, neighbour_pairs(mask)) / max(white, 1e-12)
     if noise > NOISE_LIMIT:
@@ -257,7 +258,8 @@ def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.n
     solved = np.where(ok[:, None], unit(solved - offset), start)
     log.info("each pixel's normal solved from its own images under the fitted reflectance: %d of %d "
              "pixels, %.2f° from the upsampled fit on average (image noise %.3f of the 99th "
-             "percentile%s)", ok.sum(), ok.size, float(angular_error(solved, start).mean()), noise,
+             "percentile; %d whose fitted reflectance has a specular lobe keep the fit%s)", ok.sum(), ok.size,
+             float(angular_error(solved, start).mean()), noise, int(lobed.sum()),
              "" if held is None else f"; {int(held[mask].sum())} of a dark material keep the fit")
     refined = normals.copy()
     refined[mask] = solved
