@@ -43,7 +43,8 @@ LOBE_PEAK = 2.0
 of its median keeps the upsampled fit (:func:`reflectance_peak`): its reflectance turns with the
 normal, and the solve, holding it fixed, moved such pixels off a right fit (on the light
 benchmark's 24 unseen objects the mean 10.78° → 10.48°, blob07's nickel and PVC 13.8° and 10.9° →
-8.6°, the worst blob09's +0.05°; under 12 lights 12.82° → 12.64°: ``experiments/light_benchmark/``, "Each pixel's solve
+8.6°, the worst blob09's +0.05°; under 20 and 12 lights 10.60° → 10.34° and 12.82° → 12.64°, with
+losses up to 1.3° among the gains: ``experiments/light_benchmark/``, "Each pixel's solve
 and a specular lobe"). The error was flat from 1.5 to 2.5 there; a Lambertian pixel's peak is 1."""
 NOISE_LIMIT = 0.15
 """Image noise (σ, a share of the images' 99th percentile) above which each pixel's own images
