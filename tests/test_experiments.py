@@ -330,6 +330,43 @@ def test_nir_benchmark_fits_a_stale_row_afresh(tmp_path, monkeypatch):
         assert [p.name for p in row.iterdir()] == [benchmark.runs.MARK]
 
 
+def test_a_row_whose_read_out_settings_changed_is_read_out_again_from_its_checkpoint(tmp_path, monkeypatch):
+    """Where a row's fit differs from the one asked for only in the preset's read-out settings, its
+    checkpoint stays (unps.fit resumes from it at its last step and reads the normals out again) and
+    its metrics go; any other difference still fits it from nothing."""
+    benchmark = load_script("nir_benchmark_read_out", "experiments/neural_inverse_rendering/benchmark.py")
+    row = tmp_path / "ball-gt-unps-fast"
+    old = benchmark.runs.fit_settings(["subject=ball", "preset.refine_pixels=false", "preset.continue_held=0"])
+
+    def made_with(settings: dict) -> None:
+        (row / ".hydra").mkdir(parents=True, exist_ok=True)
+        (row / ".hydra" / "config.yaml").write_text(json.dumps(settings))
+        (row / "checkpoints").mkdir(exist_ok=True)
+        (row / "checkpoints" / "last.ckpt").write_text("the fit's last checkpoint")
+        (row / "metrics.json").write_text(json.dumps({"normal_mae": 9.0}))
+
+    made_with(old)
+    now = benchmark.runs.fit_settings(["subject=ball"])
+    assert benchmark.runs.steps_kept(row, now)
+    assert not benchmark.runs.steps_kept(row, benchmark.runs.fit_settings(["subject=ball", "preset.lr=1e-3"]))
+    seen = []
+
+    def fit(command, **kwargs):
+        seen.append(sorted(p.relative_to(row).as_posix() for p in row.rglob("*")))
+        (row / "metrics.json").write_text(json.dumps({"normal_mae": 2.0}))
+        return subprocess.CompletedProcess(command, 0, "", "")
+
+    monkeypatch.setattr(benchmark.subprocess, "run", fit)
+    assert benchmark.run(row, "subject=ball")["normal_mae"] == 2.0
+    assert seen == [[".hydra", ".hydra/config.yaml", "checkpoints", "checkpoints/last.ckpt"]]
+    made_with(benchmark.runs.fit_settings(["subject=ball", "preset.refine_pixels=false", "preset.steps=300"]))
+    assert benchmark.run(row, "subject=ball")["normal_mae"] == 2.0
+    assert seen[1] == []
+    made_with(old)
+    (row / "checkpoints" / "last.ckpt").unlink()    # nothing to resume from: made again from nothing
+    assert not benchmark.runs.steps_kept(row, now)
+
+
 def test_nir_benchmark_names_a_missing_diligent_folder(tmp_path):
     """--diligent points the benchmark at DiLiGenT; a folder that is not there is named, nothing run."""
     missing = tmp_path / "no-diligent"

@@ -595,6 +595,8 @@ def test_a_killed_fit_resumes_from_its_last_checkpoint_and_a_finished_one_reads_
     rerun = fit(config(uninterrupted, *overrides))   # a finished folder
     assert rerun["resumed_from_step"] == 40
     np.testing.assert_array_equal(np.load(tmp_path / "normals.npy"), np.load(uninterrupted / "normals.npy"))
+    read_out = fit(config(uninterrupted, *overrides, "preset.refine_pixels=false", "preset.continue_held=0"))
+    assert read_out["resumed_from_step"] == 40      # settings of the read-out alone: no step is run again
     other = config(tmp_path, *overrides, "preset.lr=1e-3")
     with pytest.raises(InputError, match="belongs to another run"):
         fit(other)

@@ -57,23 +57,26 @@ def run_row(folder: Path, obj: scenes.BenchmarkObject, method: str, light: str,
             settings: list[str], out: Path) -> dict:
     """One ``python -m unps.fit`` run; its metrics. Skipped when its metrics.json exists and the run
     was made with the settings this one would be (:func:`runs.stale_run`); a run finished or
-    stopped part way under other settings is made again from nothing (:func:`runs.discard`);
-    refused while another process runs it (:func:`runs.held`)."""
+    stopped part way under other settings is made again from nothing (:func:`runs.discard`), or,
+    where only the preset's read-out settings differ, resumed from its checkpoint and read out
+    again (:func:`runs.steps_kept`); refused while another process runs it (:func:`runs.held`)."""
     run_dir = out / f"{obj.name}-{method}"
     metrics = run_dir / "metrics.json"
     overrides = ["subject=folder", f"subject.root={folder}", f"subject.name={obj.name}",
                  f"subject.quantization={scenes.quantization(obj.storage)}", f"light={light}",
                  f"method={method}", *(settings if method == "unps" else [])]
-    why = runs.stale_run(run_dir, runs.fit_settings(overrides)) if runs.begun(run_dir) else None
+    expected = runs.fit_settings(overrides)
+    why = runs.stale_run(run_dir, expected) if runs.begun(run_dir) else None
+    keep_steps = why is not None and runs.steps_kept(run_dir, expected)
     if why:
-        print(f"  {obj.name} {method}: run again, {why}", flush=True)
+        print(f"  {obj.name} {method}: {'read out again' if keep_steps else 'run again'}, {why}", flush=True)
     if why or not metrics.is_file():
         command = [sys.executable, "-m", "unps.fit", *overrides, f"hydra.run.dir={run_dir}"]
         try:
             with runs.held(run_dir):
                 print(f"  running {obj.name} {method}", flush=True)
                 if why:
-                    runs.discard(run_dir)
+                    runs.clear(run_dir, keep_steps)
                 done = subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                                       env={**os.environ, "HYDRA_FULL_ERROR": "1"})
         except RuntimeError as busy:

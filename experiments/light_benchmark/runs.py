@@ -136,6 +136,38 @@ def discard(run_dir: Path) -> None:
             child.unlink()
 
 
+def steps_kept(run_dir: Path, expected: dict) -> bool:
+    """Whether the fit kept in ``run_dir`` left a checkpoint and was made with the settings
+    ``expected`` (:func:`fit_settings`) but for the preset's read-out ones
+    (:data:`unps.inverse.settings.READ_OUT_FIELDS`): ``unps.fit`` resumes from that checkpoint
+    (at the last step, where the fit finished) and reads the normals out again, in seconds."""
+    from omegaconf import OmegaConf
+
+    recorded = run_dir / ".hydra" / "config.yaml"
+    if not recorded.is_file() or not (run_dir / "checkpoints" / "last.ckpt").is_file():
+        return False
+    config = OmegaConf.to_container(OmegaConf.load(recorded))
+    return not differences(_without_read_out({key: config.get(key) for key in FIT_SETTINGS}),
+                           _without_read_out(expected))
+
+
+def clear(run_dir: Path, keep_steps: bool) -> None:
+    """Make way in ``run_dir`` for a fit with other settings: all it left goes (:func:`discard`),
+    but where ``keep_steps`` (:func:`steps_kept`), only its ``metrics.json``, so that the fit
+    resumes from its checkpoint."""
+    if keep_steps:
+        (run_dir / "metrics.json").unlink(missing_ok=True)
+    else:
+        discard(run_dir)
+
+
+def _without_read_out(settings: dict) -> dict:
+    from unps.inverse.settings import READ_OUT_FIELDS
+
+    preset = {k: v for k, v in (settings.get("preset") or {}).items() if k not in READ_OUT_FIELDS}
+    return {**settings, "preset": preset}
+
+
 def _holder(mark: Path) -> int | None:
     """The process id in ``mark``, or None where it cannot be read."""
     try:

@@ -55,7 +55,8 @@ def run(out: Path, *overrides: str) -> dict:
     A finished row is read, not refitted, and a killed one resumed, only if Hydra recorded it with
     these overrides; a finished or killed row made with other settings than these overrides give now (a
     default changed since, :func:`runs.stale_run`) is made again from nothing (:func:`runs.discard`),
-    and says so.
+    or, where only the preset's read-out settings differ, resumed from its checkpoint and read out
+    again (:func:`runs.steps_kept`), and says so.
     """
     metrics = out / "metrics.json"
     recorded = out / ".hydra" / "overrides.yaml"
@@ -64,10 +65,12 @@ def run(out: Path, *overrides: str) -> dict:
         if done_with != wanted:
             raise ValueError(f"{out} was run with other overrides: it lacks {sorted(wanted - done_with)} "
                              f"and has {sorted(done_with - wanted)}; give this setting its own --out")
-    why = runs.stale_run(out, runs.fit_settings(list(overrides))) if runs.begun(out) else None
+    expected = runs.fit_settings(list(overrides))
+    why = runs.stale_run(out, expected) if runs.begun(out) else None
     if why:
-        print(f"  {out.name}: run again, {why}", flush=True)
-        runs.discard(out)
+        keep_steps = runs.steps_kept(out, expected)
+        print(f"  {out.name}: {'read out again' if keep_steps else 'run again'}, {why}", flush=True)
+        runs.clear(out, keep_steps)
     if not metrics.is_file():
         code = ("import atexit, json, resource, sys, runpy\n"
                 f"atexit.register(lambda: open({str(out / 'peak_rss_kb')!r}, 'w').write("

@@ -32,7 +32,9 @@ LIGHTNING_NOISE = (".*dataloader is not resumable.*", ".*does not have many work
 
 
 def fingerprint(subject: Subject, light_directions: np.ndarray, settings: dict) -> str:
-    """SHA-256 of the working data and settings: a checkpoint resumes only the run it came from."""
+    """SHA-256 of the working data and the settings the steps depend on (the preset's
+    :meth:`~unps.inverse.settings.Preset.fit_fields`, not its read-out ones): a checkpoint resumes
+    only the run it came from."""
     digest = hashlib.sha256()
     for array in (subject.images, subject.mask, light_directions):
         digest.update(np.ascontiguousarray(array).tobytes())

@@ -38,7 +38,7 @@ from unps.inverse.highlights import highlight_normals, lambertian_misfit
 from unps.inverse.interreflection import Interreflection
 from unps.inverse.networks import NormalNet, ReflectanceNet
 from unps.inverse.pixels import NOISE_LIMIT, neighbour_pairs, noise_level, refine_pixel_normals
-from unps.inverse.settings import InterreflectionModel, Preset
+from unps.inverse.settings import READ_OUT_FIELDS, InterreflectionModel, Preset
 from unps.inverse.system import DARK_SHARE, InverseRendering
 from unps.metrics import angular_error
 from unps.solvers.nayar import reflectance_scale
@@ -70,8 +70,10 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
         preset: sizes and schedule.
         interreflection: the interreflection model.
         refine_lights: learn the lights jointly, starting from ``light_directions``.
-        output_dir: run folder for checkpoints (resumed from when present) and TensorBoard;
-            None keeps everything in memory.
+        output_dir: run folder for checkpoints (resumed from when present; a finished fit's is
+            read out again, under read-out settings that may differ from its own:
+            :data:`unps.inverse.settings.READ_OUT_FIELDS`) and TensorBoard; None keeps everything
+            in memory.
         device: where the fit runs, its robust initialisation and interreflection updates included
             (:func:`unps.device.resolve_device`).
 
@@ -79,7 +81,7 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
         Normals and albedo on the subject's grid, the refined lights when ``refine_lights``, the
         per-image maps on the working grid and the fit's figures in ``info``.
     """
-    settings = {"preset": preset.fields(), "interreflection": dataclasses.asdict(interreflection),
+    settings = {"preset": preset.fit_fields(), "interreflection": dataclasses.asdict(interreflection),
                 "refine_lights": refine_lights}
     schedule = preset.schedule
     device = resolve_device(device)
@@ -124,7 +126,12 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
     with stage("steps"):
         seconds, resumed_from = train(system, schedule, output_dir, subject.name, device)
     steps_run = schedule.steps - resumed_from
-    log.info("fitted %d steps in %.1f s (%.3f s/step)", steps_run, seconds, seconds / max(steps_run, 1))
+    if steps_run == 0:
+        log.info("the fit's %d steps were run before in %s: its normals are read out again, with the "
+                 "read-out settings given now (preset.%s)", schedule.steps, output_dir,
+                 ", preset.".join(READ_OUT_FIELDS))
+    else:
+        log.info("fitted %d steps in %.1f s (%.3f s/step)", steps_run, seconds, seconds / steps_run)
 
     with stage("read-out"):
         rendering = final_rendering(system, schedule.images_per_step or 16, scale)

@@ -14,6 +14,9 @@ from unps.inverse.schedule import Schedule
 
 INITS = ("robust", "least_squares")
 PRECISIONS = ("auto", "32-true", "bf16-mixed")
+READ_OUT_FIELDS = ("continue_black", "continue_held", "continue_outline", "refine_pixels", "highlights")
+"""The :class:`Preset` fields used only after the last step, to read the normals out of the fitted
+networks: a finished fit's checkpoint is read out again under other values of them."""
 
 
 @dataclass(frozen=True)
@@ -121,6 +124,15 @@ class Preset:
         """The flat fields again, as the config node has them."""
         flat = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "schedule"}
         return {**flat, **dataclasses.asdict(self.schedule)}
+
+    def fit_fields(self) -> dict:
+        """:meth:`fields` less :data:`READ_OUT_FIELDS`: what the fit's steps depend on, and so what
+        a checkpoint must have been made with to be resumed (:func:`unps.inverse.control.fingerprint`).
+
+        >>> sorted(set(Preset().fields()) - set(Preset().fit_fields())) == sorted(READ_OUT_FIELDS)
+        True
+        """
+        return {name: value for name, value in self.fields().items() if name not in READ_OUT_FIELDS}
 
 
 @dataclass(frozen=True)
