@@ -96,7 +96,7 @@ def scaled_normals(shading: np.ndarray, weight: np.ndarray, lights: np.ndarray) 
 
 def refine_pixel_normals(images: np.ndarray, colour: np.ndarray, normals: np.ndarray, lights: np.ndarray,
                          usable: np.ndarray | None = None,
-                         reweightings: int = 3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                         reweightings: int = 3) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Each pixel's normal under the fitted reflectance, from its own images (L1, by iteratively
     reweighted least squares), starting from ``normals``.
 
