@@ -141,14 +141,10 @@ def steps_kept(run_dir: Path, expected: dict) -> bool:
     ``expected`` (:func:`fit_settings`) but for the preset's read-out ones
     (:data:`unps.inverse.settings.READ_OUT_FIELDS`): ``unps.fit`` resumes from that checkpoint
     (at the last step, where the fit finished) and reads the normals out again, in seconds."""
-    from omegaconf import OmegaConf
-
-    recorded = run_dir / ".hydra" / "config.yaml"
-    if not recorded.is_file() or not (run_dir / "checkpoints" / "last.ckpt").is_file():
+    recorded = recorded_settings(run_dir)
+    if recorded is None or not (run_dir / "checkpoints" / "last.ckpt").is_file():
         return False
-    config = OmegaConf.to_container(OmegaConf.load(recorded))
-    return not differences(_without_read_out({key: config.get(key) for key in FIT_SETTINGS}),
-                           _without_read_out(expected))
+    return not differences(_without_read_out(recorded), _without_read_out(expected))
 
 
 def clear(run_dir: Path, keep_steps: bool) -> None:
@@ -230,17 +226,26 @@ def begun(run_dir: Path) -> bool:
     return (run_dir / "metrics.json").is_file() or (run_dir / ".hydra" / "config.yaml").is_file()
 
 
-def stale_run(run_dir: Path, expected: dict) -> str | None:
-    """Why the run kept in ``run_dir`` cannot stand for a run with the settings ``expected``
-    (:func:`fit_settings`): the settings that differ (a default changed since it ran), or no
-    record of them; None where it can."""
+def recorded_settings(run_dir: Path) -> dict | None:
+    """The settings of :data:`FIT_SETTINGS` that the run in ``run_dir`` was made with, as its
+    ``.hydra/config.yaml`` records them; None where there is no record."""
     from omegaconf import OmegaConf
 
     recorded = run_dir / ".hydra" / "config.yaml"
     if not recorded.is_file():
-        return "no record of the settings it was made with"
+        return None
     config = OmegaConf.to_container(OmegaConf.load(recorded))
-    changed = differences({key: config.get(key) for key in FIT_SETTINGS}, expected)
+    return {key: config.get(key) for key in FIT_SETTINGS}
+
+
+def stale_run(run_dir: Path, expected: dict) -> str | None:
+    """Why the run kept in ``run_dir`` cannot stand for a run with the settings ``expected``
+    (:func:`fit_settings`): the settings that differ (a default changed since it ran), or no
+    record of them; None where it can."""
+    recorded = recorded_settings(run_dir)
+    if recorded is None:
+        return "no record of the settings it was made with"
+    changed = differences(recorded, expected)
     if not changed:
         return None
     return f"made with other settings ({listed(changed)})"
