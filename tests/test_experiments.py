@@ -13,7 +13,7 @@ from hydra import compose, initialize_config_module
 from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
 from hydra.core.override_parser.overrides_parser import OverridesParser
 
-from conftest import diligent_object, load_script
+from conftest import SHARED_DATA, diligent_object, load_script
 from unps.data.analytic import render_lambertian
 from unps.data.diligent import find_diligent_object, read_diligent, read_diligent_object, read_folder
 from unps.data.lights import Lights
@@ -1221,6 +1221,38 @@ def test_light_benchmark_diligent_rig_group_lights_the_same_objects_with_diligen
         np.testing.assert_array_equal(rig.directions[label], directions[chosen])
     found = list(benchmark.cases(["diligent-rig"], ["96"], folder.parents[2], folder, names=["pits"]))
     assert [(group, name, label) for group, name, label, _ in found] == [("diligent-rig", "pits", "96")]
+
+
+@pytest.mark.slow
+def test_light_benchmark_renders_without_interreflections_when_traced_to_two_bounces(tmp_path, monkeypatch):
+    """``--bounces 2``: a bowl's faces turned from a light get no light at all (they get its
+    interreflections at the default), and the captures are cached apart while the default's keep
+    their keys."""
+    data = SHARED_DATA
+    if not (data / "merl_nbrdf").is_dir():
+        pytest.skip(f"MERL fits not found at {data / 'merl_nbrdf'}")
+    benchmark = load_script("lb_benchmark", "experiments/light_benchmark/benchmark.py")
+    scenes = benchmark.scenes
+    bowl = next(obj for obj in scenes.OBJECTS if obj.name == "bowl-a")
+    direct_only = dataclasses.replace(bowl, bounces=2)
+    assert bowl.bounces == scenes.BOUNCES > 2 and direct_only.key() != bowl.key()
+    directions = np.array([[0.5, 0.3, 0.81], [-0.6, 0.1, 0.79]])
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    rig = scenes.Rig({"2": directions}, {"2": np.ones((2, 3))})
+    turned_away = {}
+    for obj in (bowl, direct_only):
+        radiance, normals, _, mask = scenes.render_radiance(obj, data, rig)
+        away = (normals[mask] @ directions.T).T < -0.05                          # (2, m)
+        assert away.sum() > 100
+        turned_away[obj.bounces] = radiance["2"][:, mask].mean(-1)[away]
+    assert np.all(turned_away[2] == 0) and turned_away[scenes.BOUNCES].mean() > 0.005
+
+    made = []
+    monkeypatch.setattr(scenes, "make_captures", lambda obj, data, cache: made.append(obj) or {"12": tmp_path})
+    monkeypatch.setattr(benchmark, "read_diligent", lambda folder, name, quantization: name)
+    found = benchmark.cases(["benchmark", "single"], ["12"], tmp_path, tmp_path, names=["pits"], bounces=2)
+    assert [read() for *_, read in found] == ["pits", "pits"]
+    assert [obj.bounces for obj in made] == [2, 2]
 
 
 def test_lamps_study_evens_out_each_lamps_brightness_and_colour_from_its_true_intensity():

@@ -4,6 +4,7 @@
     python experiments/light_benchmark/benchmark.py --only benchmark --sets 12
     python experiments/light_benchmark/benchmark.py --stages reversal contour selfcal
     python experiments/light_benchmark/benchmark.py --set selfcal.gbr_weight=0.1 --tag gbr01
+    python experiments/light_benchmark/benchmark.py --only benchmark --bounces 2 --tag direct-only
 
 The cases (none of them feeds training):
 
@@ -23,6 +24,9 @@ The cases (none of them feeds training):
   evenly spread over their lights (farthest-point order from the light nearest the view).
 - **synthetic**: unps's eight rendered subjects (100 images).
 
+``--bounces 2`` renders the first three groups' objects with the direct light alone, cast shadows
+included and no interreflection (cached apart): what the stages would give if there were none.
+
 Each case runs ``light=estimated`` as ``python -m unps.fit`` does (the network, then the stages
 of ``--stages``, default those of ``light=selfcal``; ``--set`` overrides their settings as on the
 command line) and prints, per stage, the direction error and intensity error of the lights after
@@ -40,6 +44,7 @@ import json
 import logging
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -61,8 +66,9 @@ DEFAULT_GROUPS = ("benchmark", "diligent", "synthetic")
 RAISED, RAISED_TWICE = 1.0, 2.0     # degrees: a stage that raised the error by more is flagged
 
 
-def cases(groups, sets, data: Path, cache: Path, names=None):
-    """(group, name, light set, function reading the subject) for every case asked for."""
+def cases(groups, sets, data: Path, cache: Path, names=None, bounces: int = scenes.BOUNCES):
+    """(group, name, light set, function reading the subject) for every case asked for, the
+    rendered objects' interreflections traced to ``bounces`` (2: none)."""
     for group, objects in (("benchmark", scenes.OBJECTS), ("single", scenes.SINGLE_MATERIAL),
                            ("diligent-rig", scenes.ON_DILIGENT_RIG)):
         if group not in groups:
@@ -70,6 +76,7 @@ def cases(groups, sets, data: Path, cache: Path, names=None):
         for obj in objects:
             if names and obj.name not in names:
                 continue
+            obj = replace(obj, bounces=bounces)
             for label in sets:
                 def read(obj=obj, label=label):
                     folder = scenes.make_captures(obj, data, cache)[label]
@@ -325,9 +332,16 @@ def main():
     parser.add_argument("--threads", type=int, default=1,
                         help="torch threads (default 1, as the other studies: two runs side by side at "
                              "torch's default of one thread per core took 60 times as long a case)")
+    parser.add_argument("--bounces", type=int, default=scenes.BOUNCES,
+                        help=f"the rendered objects' interreflections traced to this many bounces "
+                             f"(default {scenes.BOUNCES}; 2: none, the direct light and its cast shadows "
+                             f"alone; rendered on first use and cached apart)")
     parser.add_argument("--list", action="store_true", help="print the objects as a Markdown table and stop")
     parser.add_argument("--verbose", action="store_true")
     args = parser.parse_args()
+    if args.bounces < 2:
+        parser.error(f"--bounces is the path tracer's longest path, at least 2 (direct light), "
+                     f"got {args.bounces}")
     if args.list:
         print(catalogue())
         return
@@ -343,16 +357,22 @@ def main():
         parser.error(str(e))
     out = args.out or args.cache / "results" / args.tag
     try:
-        runs.claim(out, {"stages": stage_names, "settings": args.settings, "scenes": scenes.SCENE_VERSION,
-                         "weights": weights_used(args.settings)})
+        claimed = {"stages": stage_names, "settings": args.settings, "scenes": scenes.SCENE_VERSION,
+                   "weights": weights_used(args.settings)}
+        if args.bounces != scenes.BOUNCES:
+            claimed["bounces"] = args.bounces
+        runs.claim(out, claimed)
     except (ValueError, InputError) as e:
         parser.error(str(e))
     print(f"stages: network → {' → '.join(stage_names) or '(none)'}; settings: "
-          f"{' '.join(args.settings) or 'defaults'}; results in {out}")
+          f"{' '.join(args.settings) or 'defaults'}"
+          + ("" if args.bounces == scenes.BOUNCES else f"; renders traced to {args.bounces} bounces")
+          + f"; results in {out}")
     print(f"{'group':<9} {'case':<12} {'set':>3} {'network':>8} "
           + " ".join(f"{s:>9}" for s in stage_names) + f" {'final':>8} {'int':>6} {'time':>6}  raised")
     results = {}
-    for group, name, label, read in cases(args.only, args.sets, args.data, args.cache, args.names):
+    for group, name, label, read in cases(args.only, args.sets, args.data, args.cache, args.names,
+                                          args.bounces):
         path = out / f"{group}-{name}-{label}.json"
         result = json.loads(path.read_text()) if path.is_file() else None
         why = None if result is None else stale(result, made_with)

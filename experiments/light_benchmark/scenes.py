@@ -75,6 +75,8 @@ class BenchmarkObject:
         seed: draws the pose, patches, texture, lights and camera.
         rig: ``drawn`` (:func:`draw_rig`) or ``diligent``: DiLiGenT's own 96 lights, directions and
             intensities as ball's files give them (:func:`diligent_rig`).
+        bounces: the path tracer's longest path for the interreflections (:data:`BOUNCES`); 2
+            renders the direct light alone, cast shadows included and no interreflection.
     """
 
     name: str
@@ -83,12 +85,12 @@ class BenchmarkObject:
     storage: str
     seed: int
     rig: str = "drawn"
+    bounces: int = BOUNCES
 
     def key(self, camera: bool = True) -> str:
         """A short hash of everything that makes its radiance (and, with ``camera``, its captures);
         the drawn rig, the first, adds nothing to it."""
-        spec = {**asdict(self), "version": SCENE_VERSION, "resolution": RESOLUTION, "spp": SPP,
-                "bounces": BOUNCES}
+        spec = {**asdict(self), "version": SCENE_VERSION, "resolution": RESOLUTION, "spp": SPP}
         if self.rig == "drawn":
             del spec["rig"]
         if camera:
@@ -345,7 +347,7 @@ def render_radiance(obj: BenchmarkObject, data: Path, rig: Rig, progress=None):
         normals, depth, mask = _ground_truth(path, RESOLUTION, obj.seed)
         stand_in = {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": STAND_IN}}
         scenes = {bounces: _scene(path, stand_in, {"type": "path", "max_depth": bounces},
-                                  RESOLUTION, SPP, "stratified") for bounces in (2, BOUNCES)}
+                                  RESOLUTION, SPP, "stratified") for bounces in {2, obj.bounces}}
         params = {bounces: mi.traverse(scene) for bounces, scene in scenes.items()}
         brdfs = [read_neural_brdf(data / "merl_nbrdf" / f"{name}.h5") for name in obj.materials]
         white = hemispherical_albedo(read_neural_brdf(data / "merl_nbrdf" / f"{WHITE[0]}.h5")).mean()
@@ -364,8 +366,10 @@ def render_radiance(obj: BenchmarkObject, data: Path, rig: Rig, progress=None):
             shading = np.clip(normals[mask] @ directions.T, 0, None).T              # (n, m)
             images = np.zeros((len(directions), *mask.shape, 3), np.float32)
             for i, light in enumerate(directions):
-                only_direct, full = (_render(scenes[b], params[b], light, obj.seed * 7919 + i)
-                                     for b in (2, BOUNCES))
+                seed = obj.seed * 7919 + i
+                only_direct = _render(scenes[2], params[2], light, seed)
+                full = (_render(scenes[obj.bounces], params[obj.bounces], light, seed)
+                        if obj.bounces > 2 else only_direct)
                 lit = np.where(shading[i] > 0.02, only_direct[mask].mean(-1)
                                / (STAND_IN * np.maximum(shading[i], 0.02)), 1.0).clip(0, 1)
                 bounced = np.clip(full - only_direct, 0, None)[mask] * (receiving / STAND_IN) \
