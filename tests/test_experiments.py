@@ -1255,6 +1255,16 @@ def test_light_benchmark_renders_without_interreflections_when_traced_to_two_bou
     assert [obj.bounces for obj in made] == [2, 2]
 
 
+def test_light_benchmark_refuses_fewer_than_two_bounces_by_name(tmp_path, capsys, monkeypatch):
+    benchmark = load_script("lb_benchmark", "experiments/light_benchmark/benchmark.py")
+    monkeypatch.setattr(sys, "argv", ["benchmark.py", "--bounces", "1", "--out", str(tmp_path / "out")])
+    with pytest.raises(SystemExit) as stop:
+        benchmark.main()
+    assert stop.value.code == 2
+    assert "--bounces is the path tracer's longest path, at least 2 (direct light), got 1" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
 def test_lamps_study_evens_out_each_lamps_brightness_and_colour_from_its_true_intensity():
     """``lamps alike``: each image divided by its light's RGB intensity — the images a rig of
     equal white lamps would give; ``lamps white``: times that intensity's mean, brightness kept."""
