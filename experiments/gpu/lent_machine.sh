@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # One call on a lent GPU machine (a bare CUDA image without ../shared), at most 9 minutes: the CUDA
-# tests, the paper preset's fit of cat in float32 and with its networks in bfloat16, the training
+# tests, the paper preset's fits of cat and pot1 with the true lights as it runs on a GPU (networks
+# in bfloat16, to set beside the fast preset's), the training
 # and data rows, where rendering the training data spends the GPU's time, a fresh process's
 # start-up and the default command; every line also lands in $OUT/log, with each part's seconds.
 #   here:   bash ../shared/tools/gpu-prep.sh          (packs .gpu/: wheels and two DiLiGenT crops)
@@ -22,7 +23,7 @@ part() {   # part <seconds> <label> <command…>: run it within the limit, say h
 }
 part 80 tests python3 -m pytest -q -p no:cacheprovider tests/test_device.py tests/test_training_data.py \
   tests/test_inverse.py -k "test_device or gpu or batch or bf16 or second" 2>&1 | tail -3
-part 220 paper $gpu --rows paper --subjects cat --fit-precisions 32-true bf16-mixed 2>&1 | grep "^|\|^\["
+part 220 paper $gpu --rows paper --subjects cat pot1 --fit-precisions bf16-mixed 2>&1 | grep "^|\|^\["
 part 110 "train, data" $gpu --rows train data --precisions 32-true 2>&1 | grep "^|\|^\["
 part 40 render $gpu --rows render 2>&1 | grep -v "^  running\|^machine\|USDT"
 part 30 start $gpu --rows start 2>&1 | grep "^|\|^\["
