@@ -646,6 +646,24 @@ def test_error_by_angle_splits_the_mean_into_bands_that_add_up():
     assert rows[5][1:] == (0.2, 40.0, 8.0)
 
 
+def test_reflectance_spread_reads_each_run_and_names_one_without_reflectance(tmp_path, capsys):
+    """One albedo for every image spreads 0; a pixel lit twice as bright in half its images
+    spreads 1/3 (std 0.5 over mean 1.5); a folder without reflectance.npy is named, exit 2."""
+    study = load_script("calibrated_reflectance_spread", "experiments/calibrated/reflectance_spread.py")
+    reflectance = np.ones((4, 1, 3, 3))
+    reflectance[:2, 0, 1] = 2.0
+    reflectance[:, 0, 2] = 0.0                                      # off the object
+    run = tmp_path / "run"
+    run.mkdir()
+    np.save(run / "reflectance.npy", reflectance)
+    (run / "metrics.json").write_text('{"normal_mae": 1.5, "slant_bias": 0.25}')
+    assert study.reflectance_spread(reflectance).tolist() == pytest.approx([0.0, 1 / 3])
+    assert study.main([str(run)]) == 0
+    assert "0.167" in capsys.readouterr().out.splitlines()[1]      # the mean of 0 and 1/3
+    assert study.main([str(tmp_path / "missing")]) == 2
+    assert "missing: no reflectance.npy" in capsys.readouterr().err
+
+
 def test_last_steps_averages_the_normals_of_each_window_of_the_last_steps(capsys):
     """N_o that swings ±10° about the truth from step to step is 10° off at every step, and its
     unit mean over an even number of the last steps is on the truth; steps before the longest

@@ -95,6 +95,8 @@ def test_batch_norm_reads_out_with_the_statistics_it_was_fitted_with():
 @pytest.mark.parametrize("field, value, message", [
     ("reflectance_branch", 0, "preset.reflectance_branch must be a whole number >= 1, got 0"),
     ("reflectance_branch", 2.5, "preset.reflectance_branch must be a whole number >= 1, got 2.5"),
+    ("feature_scale_width", 0, "preset.feature_scale_width must be a whole number >= 1 or null, got 0"),
+    ("feature_scale_width", 48.5, "preset.feature_scale_width must be a whole number >= 1 or null, got 48.5"),
     ("batch_norm", "yes", "preset.batch_norm must be true or false, got 'yes'"),
     ("cast_shadows", 1, "preset.cast_shadows must be true or false, got 1"),
     ("continue_black", "yes", "preset.continue_black must be true or false, got 'yes'"),
@@ -160,6 +162,18 @@ def test_the_global_term_equals_concatenating_the_features_to_every_image():
                                 (1, 1, 1, 1)), weight, refl.image_in.bias)
     split = refl.image_in(torch.cat([images, spec], 1)) + refl.global_term(features)
     torch.testing.assert_close(joint, split)
+
+
+def test_a_wide_normal_networks_features_are_scaled_down_in_f_sp_and_a_48_wide_ones_are_not():
+    """The paper preset's 384 channels enter f_sp at 48/384 of their weight; the fast preset's 48
+    as Taniai & Maehara have them, so its fits are unchanged by the option."""
+    features = torch.rand(1, 384, 5, 6)
+    plain = ReflectanceNet(feature_width=384, width=4)
+    scaled = ReflectanceNet(feature_width=384, width=4, feature_scale=Preset(width=384).feature_scale())
+    scaled.load_state_dict(plain.state_dict())
+    torch.testing.assert_close(scaled.global_term(features), plain.global_term(features) / 8)
+    assert Preset.from_config(width=48).feature_scale() == 1.0
+    assert Preset.from_config(width=384, feature_scale_width=None).feature_scale() == 1.0
 
 
 def test_paper_preset_has_the_papers_size():

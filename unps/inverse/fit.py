@@ -386,7 +386,7 @@ def build_system(work: Subject, light_directions: np.ndarray, preset: Preset,
                         "float32", device)
     normal_net = NormalNet(work.n_images, preset.width, preset.depth, preset.first_kernel, preset.batch_norm)
     reflectance_net = ReflectanceNet(preset.width, preset.reflectance_width, preset.reflectance_depth,
-                                     preset.batch_norm, preset.reflectance_branch)
+                                     preset.batch_norm, preset.reflectance_branch, preset.feature_scale())
     true_normals = (None if work.normals is None
                     else torch.as_tensor(work.normals).permute(2, 0, 1).contiguous())
     system = InverseRendering(

@@ -102,11 +102,17 @@ class ReflectanceNet(nn.Module):
         branch: convolutions on [image ‖ specular map] alone, up to the first layer's (1: the
             image meets the global features at once; Taniai & Maehara's code has 5).
         batch_norm: normalise each hidden layer over the batch's images and pixels.
+        feature_scale: factor on the global features' term of the first layer (1: as Taniai &
+            Maehara). Under Adam each weight moves by about the learning rate a step, so that term
+            grows with ``feature_width``: a 384-wide normal network's features outweigh the image
+            in f_sp from the first steps unless scaled down (:meth:`Preset.feature_scale
+            <unps.inverse.settings.Preset.feature_scale>`).
     """
 
     def __init__(self, feature_width: int, width: int = 16, depth: int = 3, batch_norm: bool = False,
-                 branch: int = 1):
+                 branch: int = 1, feature_scale: float = 1.0):
         super().__init__()
+        self.feature_scale = feature_scale
         own: list[nn.Module] = []
         for k in range(branch - 1):
             own += [_conv(4 if k == 0 else width, width, 3), _norm(width, batch_norm), nn.LeakyReLU(0.1)]
@@ -123,7 +129,8 @@ class ReflectanceNet(nn.Module):
 
     def global_term(self, features: torch.Tensor) -> torch.Tensor:
         """(1, F, H, W) global features → (1, width, H, W), the first layer's shared part."""
-        return self.feature_in(features)
+        shared = self.feature_in(features)
+        return shared if self.feature_scale == 1 else shared * self.feature_scale
 
     def forward(self, images: torch.Tensor, specular: torch.Tensor, shared: torch.Tensor) -> torch.Tensor:
         """

@@ -27,6 +27,12 @@ class Preset:
         name: label.
         width, depth, first_kernel: the normal network (:class:`NormalNet`).
         reflectance_width, reflectance_depth, reflectance_branch: f_sp (:class:`ReflectanceNet`).
+        feature_scale_width: beyond the paper, f_sp's first layer takes the normal network's
+            global features scaled by ``feature_scale_width / width`` (never up;
+            :meth:`feature_scale`), so that they weigh in f_sp as a network this wide's do against
+            the image. None: unscaled (Taniai & Maehara). Unscaled, the 384-wide network's features
+            drown f_sp's image input, whose reflectance then varies too little between images,
+            and the normals of the smooth ball come out too steep (experiments/calibrated).
         batch_norm: batch normalisation in both networks (Taniai & Maehara's code).
         init: the start N_init and albedo P: ``robust`` (the paper's low-rank initialisation,
             :func:`unps.solvers.rpca.robust_init`) or ``least_squares`` (Woodham's, on every
@@ -72,6 +78,7 @@ class Preset:
     reflectance_width: int = 16
     reflectance_depth: int = 3
     reflectance_branch: int = 3
+    feature_scale_width: int | None = 48
     max_pixels: int | None = None
     cast_shadows: bool = True
     batch_norm: bool = True
@@ -89,6 +96,11 @@ class Preset:
                 or self.reflectance_branch < 1:
             raise InputError(f"preset.reflectance_branch must be a whole number >= 1, got "
                              f"{self.reflectance_branch!r}")
+        if self.feature_scale_width is not None and (
+                isinstance(self.feature_scale_width, bool) or not isinstance(self.feature_scale_width, int)
+                or self.feature_scale_width < 1):
+            raise InputError(f"preset.feature_scale_width must be a whole number >= 1 or null, got "
+                             f"{self.feature_scale_width!r}")
         if self.init not in INITS:
             raise InputError(f"preset.init must be one of {', '.join(INITS)}, got {self.init!r}")
         if isinstance(self.continue_held, bool) or not isinstance(self.continue_held, (int, float)) \
@@ -101,6 +113,18 @@ class Preset:
                      "highlights"):
             if not isinstance(getattr(self, name), bool):
                 raise InputError(f"preset.{name} must be true or false, got {getattr(self, name)!r}")
+
+    def feature_scale(self) -> float:
+        """f_sp's factor on the global features (:class:`unps.inverse.networks.ReflectanceNet`).
+
+        >>> Preset(width=384, feature_scale_width=48).feature_scale()
+        0.125
+        >>> Preset(width=48).feature_scale(), Preset(feature_scale_width=None).feature_scale()
+        (1.0, 1.0)
+        """
+        if self.feature_scale_width is None:
+            return 1.0
+        return min(1.0, self.feature_scale_width / self.width)
 
     def network_precision(self, device: torch.device) -> str:
         """``precision`` for a fit on ``device``: ``auto`` made ``bf16-mixed`` where the device
