@@ -26,6 +26,7 @@ from unps.data.catalogue import subjects
 from unps.data.diligent import read_diligent_object
 from unps.errors import InputError
 from unps.metrics import light_direction_mae
+from unps.pipeline.lights import estimated_lights
 
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
 DILIGENT = ("ball", "cat", "pot1")
@@ -46,7 +47,7 @@ def main():
     parser.add_argument("--no-lights", action="store_true")
     args = parser.parse_args()
     logging.basicConfig(level=logging.ERROR)
-    lights = None if args.no_lights else __import__("unps.pipeline.lights", fromlist=["x"]).estimated_lights
+    lights = None if args.no_lights else estimated_lights
     print(f"{'subject':<10} {'pixels':>7} {'IoU':>6} {'added':>6} {'missed':>6} {'contrast':>8}"
           + ("" if args.no_lights else f" {'lights: true mask':>17} {'auto mask':>9} {'between':>8}"
                                        f" {'eroded true mask':>16} {'whole image':>11}"))

@@ -52,13 +52,6 @@ def partial_svt_weights(a: torch.Tensor, rank: int, tau: float) -> torch.Tensor:
     return ((vectors * ratio) @ vectors.T).to(a.dtype)
 
 
-def partial_svt(a: torch.Tensor, rank: int, tau: float) -> torch.Tensor:
-    """P_{K,τ}[A] for an (m, n) matrix of either orientation (see :func:`partial_svt_weights`)."""
-    if a.shape[0] >= a.shape[1]:
-        return a @ partial_svt_weights(a, rank, tau)
-    return (a.T @ partial_svt_weights(a.T, rank, tau)).T
-
-
 @dataclass(frozen=True)
 class RPCAResult:
     low_rank: np.ndarray      # (m, n) Z
