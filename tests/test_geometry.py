@@ -136,7 +136,7 @@ def test_shadows_of_a_batch_are_each_image_s_shadows():
         assert torch.equal(batch, each)
 
 
-def sphere_normals(size: int = 48, edge: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def sphere_normals(size: int = 48) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(H, W, 3) unit normals of a sphere of radius 1 over [−1, 1]², its mask (r² < 0.8), and x."""
     y, x = np.mgrid[-1:1:size * 1j, -1:1:size * 1j]
     mask = x ** 2 + y ** 2 < 0.8
