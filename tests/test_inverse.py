@@ -762,15 +762,16 @@ def test_a_dark_diffuse_material_keeps_its_shading_and_speckle_holds_none():
     assert not unshaded(dark, lights).any()
     assert unshaded(speckle, lights).mean() > 0.9
 
-def test_a_fit_on_a_coarser_grid_solves_each_pixel_of_the_subject(caplog):
-    """A 40×40 Lambertian sphere fitted on a ×2 grid: each pixel's normal solved from its own
-    images under the fitted reflectance is nearer the truth than the upsampled fit, which
-    ``refine_pixels=false`` returns."""
+@pytest.mark.parametrize("max_pixels, factor", [(400, 2), (None, 1)])
+def test_each_pixel_of_the_subject_is_solved_from_its_own_images(caplog, max_pixels, factor):
+    """A 40×40 Lambertian sphere fitted on a ×2 grid, and at full resolution: each pixel's normal
+    solved from its own images under the fitted reflectance is nearer the truth than the fit's
+    (upsampled) normals, which ``refine_pixels=false`` returns."""
     sphere = render_lambertian("sphere", size=40, n_lights=16, seed=1)
     caplog.set_level("INFO")
 
-    refined, plain = (tiny_fit(sphere, max_pixels=400, refine_pixels=refine) for refine in (True, False))
-    assert refined.info["fit_downsample"] == 2
+    refined, plain = (tiny_fit(sphere, max_pixels=max_pixels, refine_pixels=refine) for refine in (True, False))
+    assert refined.info["fit_downsample"] == factor
     error = {name: angular_error(e.normals, sphere.normals)[sphere.mask].mean()
              for name, e in (("refined", refined), ("plain", plain))}
     assert error["refined"] < 0.5 * error["plain"]

@@ -142,15 +142,15 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
         directions, scales = rendering["light_directions"], rendering["light_scales"]
         image_noise = None
         held = held_from_solve(system, work.mask, cropped.mask.shape, factor)
+        fitted = normals                                         # N_o on the working grid
         if factor > 1:
             fine_init = initial_estimate(cropped, light_directions, preset.init, device).normals
-            upsampled = upsample_with_detail(normals, coarse_init, fine_init, work.mask, factor)
-            if preset.refine_pixels:
-                interreflected = upsample_map(pseudo_normals - normals, work.mask, cropped.mask.shape, factor)
-                upsampled, image_noise = solved_per_pixel(cropped, upsampled, interreflected,
-                                                          rendering["reflectance"], directions, scales,
-                                                          work.mask, factor, ~clipped, held)
-            normals = upsampled
+            normals = upsample_with_detail(fitted, coarse_init, fine_init, work.mask, factor)
+        if preset.refine_pixels:
+            interreflected = upsample_map(pseudo_normals - fitted, work.mask, cropped.mask.shape, factor)
+            normals, image_noise = solved_per_pixel(cropped, normals, interreflected,
+                                                    rendering["reflectance"], directions, scales,
+                                                    work.mask, factor, ~clipped, held)
         highlight_share, highlit = None, np.zeros_like(black)
         if preset.highlights:
             normals, highlit = with_highlights(cropped, normals, directions, scales, black)
@@ -223,8 +223,9 @@ def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.n
                      reflectance: np.ndarray, directions: np.ndarray, scales: np.ndarray,
                      work_mask: np.ndarray, factor: int, usable: np.ndarray,
                      held: np.ndarray | None = None) -> tuple[np.ndarray, float]:
-    """The upsampled fit's normals with each pixel's solved from its own images
-    (:func:`unps.inverse.pixels.refine_pixel_normals`) under the fitted reflectance, upsampled.
+    """The fit's normals with each pixel's solved from its own images
+    (:func:`unps.inverse.pixels.refine_pixel_normals`) under the fitted reflectance, upsampled
+    (``factor`` 1: the fit's own grid).
 
     The fit renders with the interreflected normals N_ny, not N_o: each pixel is solved for its
     N_ny, starting from the upsampled N_o moved by the fit's N_ny − N_o there, and that offset is

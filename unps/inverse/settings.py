@@ -55,10 +55,11 @@ class Preset:
             turns away from the camera where it reaches the object's outline, as the seen part of
             the outline does (:func:`unps.geometry.outline_normals`: the occluding contour); false:
             the least-curved surface runs on up to the outline.
-        refine_pixels: beyond the paper, a fit on a coarser working grid has each pixel's normal
-            on the subject's grid solved against its own images under the fitted reflectance
-            (:func:`unps.inverse.pixels.refine_pixel_normals`), unless the images are too noisy
-            for it (:data:`unps.inverse.pixels.NOISE_LIMIT`); no effect at full resolution.
+        refine_pixels: beyond the paper, each pixel's normal on the subject's grid is solved
+            against its own images under the fitted reflectance
+            (:func:`unps.inverse.pixels.refine_pixel_normals`), from the fit's normals (upsampled
+            from a coarser working grid), unless the images are too noisy for it
+            (:data:`unps.inverse.pixels.NOISE_LIMIT`).
         highlights: beyond the paper, pixels lit by a specular highlight (their brightest image far
             above the rest, their images not Lambertian, the lights dense) take the highlight's
             half vector for their normal (:func:`unps.inverse.highlights.highlight_normals`): the
