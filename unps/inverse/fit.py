@@ -257,9 +257,9 @@ def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.n
     noise = noise_level(images, colour, solved, directions, used, neighbour_pairs(mask)) / max(white, 1e-12)
     if noise > NOISE_LIMIT:
         log.warning("the images' noise is %.2f of their 99th percentile (above %.2f): each pixel's own "
-                    "images hold more noise than detail, so the normals are the fit's, upsampled "
-                    "(preset.refine_pixels solves each pixel only where the noise allows)", noise,
-                    NOISE_LIMIT)
+                    "images hold more noise than detail, so the normals are the fit's (upsampled from its "
+                    "working grid; preset.refine_pixels solves each pixel only where the noise allows)",
+                    noise, NOISE_LIMIT)
         return normals, noise
     if held is not None:
         ok &= ~held[mask]
