@@ -265,7 +265,7 @@ def solved_per_pixel(cropped: Subject, normals: np.ndarray, interreflected: np.n
         ok &= ~held[mask]
     solved = np.where(ok[:, None], unit(solved - offset), start)
     log.info("each pixel's normal solved from its own images under the fitted reflectance: %d of %d "
-             "pixels, %.2f° from the upsampled fit on average (image noise %.3f of the 99th "
+             "pixels, %.2f° from the fit on average (image noise %.3f of the 99th "
              "percentile; %d whose fitted reflectance has a specular lobe keep the fit%s)", ok.sum(), ok.size,
              float(angular_error(solved, start).mean()), noise, int(lobed.sum()),
              "" if held is None else f"; {int(held[mask].sum())} of a dark material keep the fit")
