@@ -17,7 +17,7 @@ def glibc() -> bool:
 
 
 @pytest.mark.skipif(not glibc(), reason="mallopt is glibc's")
-def test_glibc_accepts_the_thresholds():
+def test_glibc_accepts_the_settings():
     assert ctypes.util.find_library("c") is not None
     assert keep_freed_memory() is True
     assert keep_freed_memory() is True   # idempotent: a second fit in one process
