@@ -495,6 +495,16 @@ def test_the_networks_precision_is_bfloat16_where_the_hardware_has_it_unless_cho
             assert compose("fit", overrides=[f"preset={preset}"]).preset.precision == "auto"
 
 
+def test_the_fast_preset_solves_each_pixel_and_the_paper_preset_keeps_its_networks_normals():
+    """The fast preset inherits the paper preset's settings but solves each pixel from its own
+    images (detail finer than its working grid); the paper preset keeps its full-resolution
+    network's normals (cat's full fit 5.00° → 5.77° with the solve: experiments/calibrated)."""
+    with initialize_config_module(config_module="unps.conf", version_base="1.3"):
+        solves = {preset: compose("fit", overrides=[f"preset={preset}"]).preset.refine_pixels
+                  for preset in ("fast", "paper")}
+    assert solves == {"fast": True, "paper": False}
+
+
 def test_bf16_on_a_cpu_warns_only_where_the_cpu_lacks_bfloat16_hardware(sphere, caplog, monkeypatch):
     """A CPU with AMX or AVX512-BF16 runs bfloat16 convolutions faster than float32
     (experiments/speed): the fit says so; one with neither is warned that they may run several
