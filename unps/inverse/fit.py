@@ -151,24 +151,8 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
             normals, image_noise = solved_per_pixel(cropped, normals, interreflected,
                                                     rendering["reflectance"], directions, scales,
                                                     work.mask, factor, ~clipped, held)
-        highlight_share, highlit = None, np.zeros_like(black)
-        if preset.highlights:
-            normals, highlit = with_highlights(cropped, normals, directions, scales, black)
-            highlight_share = float(highlit.sum() / cropped.mask.sum())
-        none = np.zeros_like(black)
-        continuing = held is not None and preset.continue_held > 0
-        faint &= ~highlit
-        if faint.any():
-            faint[faint] = unshaded(cropped.images[:, faint].mean(-1) / scales[:, None], directions)
-        unlit_held = held & cropped.mask & ~highlit & ~black & ~faint if continuing else none
-        held_share = float(unlit_held.sum() / cropped.mask.sum()) if continuing else None
-        if unlit_held.any():
-            log.info("%.1f%% of the object is of a dark material the fit held and no highlight lights: "
-                     "its normals are taken %.0f%% of the way to the surface continued from the pixels "
-                     "around it (preset.continue_held)", 100 * held_share, 100 * preset.continue_held)
-        unlit = black | faint if preset.continue_black else none
-        normals = with_surface_continued(normals, cropped.mask, unlit, unlit_held, preset.continue_held,
-                                         preset.continue_outline)
+        normals, faint, shares = with_read_out_rules(cropped, normals, directions, scales, preset, black,
+                                                     faint, held)
         normals, albedo = on_subject_grid(normals, cropped, subject, directions, scales)
     black_share = float(black.sum() / cropped.mask.sum())
     if black.any():
@@ -195,8 +179,7 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
             "facet_downsample": solver.factor if solver else None,
             "interreflection_bend_deg": bend["mean"] if bend else None, "moved_from_start_deg": moved,
             "black_share": black_share, "faint_share": faint_share, "image_noise": image_noise,
-            "highlight_share": highlight_share,
-            "dark_share": dark_share, "continued_held_share": held_share, "censored_share": censored_share}
+            "dark_share": dark_share, "censored_share": censored_share, **shares}
     rendering = Rendering(work.mask, work.images, rendering["reconstruction"], rendering["reflectance"])
     return Estimate(normals, albedo, light_directions=directions if refine_lights else None,
                     light_scales=scales if refine_lights else None, rendering=rendering, info=info)
@@ -298,6 +281,51 @@ def with_highlights(cropped: Subject, normals: np.ndarray, directions: np.ndarra
     highlit = np.zeros_like(mask)
     highlit[mask] = lit
     return shown, highlit
+
+
+def with_read_out_rules(cropped: Subject, normals: np.ndarray, directions: np.ndarray, scales: np.ndarray,
+                        preset: Preset, black: np.ndarray, faint: np.ndarray,
+                        held: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The read-out's rules for the pixels whose own images pin their normals poorly (beyond the
+    paper): those lit by a specular highlight take its half vector (``preset.highlights``); the
+    surface is continued across the black ones and the faintly lit ones whose values hold no
+    shading (``preset.continue_black``); the dark ones the fit held go ``preset.continue_held`` of
+    the way to it.
+
+    Args:
+        cropped: the subject's crop, (H, W) grid; normals: (H, W, 3) the fit's there.
+        directions: (n, 3) and scales: (n,) the lights the fit rendered with.
+        preset: its read-out fields above and ``continue_outline``.
+        black, faint: (H, W) bool, the pixels black in every image and the faintly lit ones
+            (:func:`unps.data.checks.black_everywhere`, :func:`unps.data.checks.faintly_lit`).
+        held: (H, W) bool, the pixels the fit held (:func:`held_from_solve`); None: none.
+
+    Returns:
+        (H, W, 3) normals; (H, W) bool, the faintly lit pixels the surface was continued across
+        (no highlight lights them, their values hold no shading: :func:`unshaded`); and the shares
+        of the object lit by a highlight and of the held pixels moved (None where the rule is
+        off), keyed as in ``metrics.json``.
+    """
+    mask = cropped.mask
+    highlight_share, highlit = None, np.zeros_like(black)
+    if preset.highlights:
+        normals, highlit = with_highlights(cropped, normals, directions, scales, black)
+        highlight_share = float(highlit.sum() / mask.sum())
+    none = np.zeros_like(black)
+    continuing = held is not None and preset.continue_held > 0
+    faint = faint & ~highlit
+    if faint.any():
+        faint[faint] = unshaded(cropped.images[:, faint].mean(-1) / scales[:, None], directions)
+    unlit_held = held & mask & ~highlit & ~black & ~faint if continuing else none
+    held_share = float(unlit_held.sum() / mask.sum()) if continuing else None
+    if unlit_held.any():
+        log.info("%.1f%% of the object is of a dark material the fit held and no highlight lights: "
+                 "its normals are taken %.0f%% of the way to the surface continued from the pixels "
+                 "around it (preset.continue_held)", 100 * held_share, 100 * preset.continue_held)
+    unlit = black | faint if preset.continue_black else none
+    normals = with_surface_continued(normals, mask, unlit, unlit_held, preset.continue_held,
+                                     preset.continue_outline)
+    return normals, faint, {"highlight_share": highlight_share, "continued_held_share": held_share}
 
 
 def unshaded(shading: np.ndarray, lights: np.ndarray) -> np.ndarray:
