@@ -21,7 +21,7 @@ from unps.fit import fit
 from unps.inverse.pixels import NOISE_LIMIT
 from unps.inverse.fit import (FAR_FROM_START_DEG, build_system, distance_from_start, held_from_solve,
                               interreflection_bend, neural_inverse_rendering, solved_per_pixel, unit,
-                              unshaded, with_surface_continued)
+                              unshaded, with_read_out_rules, with_surface_continued)
 from unps.inverse.settings import InterreflectionModel, Preset
 from unps.inverse.grids import (black_headroom, unclipped, upsample_normals, upsample_with_detail,
                                working_factor)
@@ -416,6 +416,34 @@ def test_black_pixels_are_continued_as_before_whatever_the_held_ones_become():
             assert error < 0.9 * angular_error(start, sphere.normals)[held].mean()
         else:
             assert error < 10                                                  # measured: 5.3° (from 30°)
+
+
+def test_the_read_out_rules_continue_black_pixels_only_when_asked_and_leave_their_inputs_alone():
+    """:func:`unps.inverse.fit.with_read_out_rules` on a sphere's normals 20° off in a black band:
+    with every rule off nothing moves and no share is reported; with ``continue_black`` the band
+    is the surface continued across it, and nothing else moves. The faint mask it is given stays
+    as it was (the rules hand back their own)."""
+    sphere = render_lambertian("sphere", size=32, n_lights=12, seed=2)
+    mask = sphere.mask
+    black = mask.copy()
+    black[:, :12] = black[:, 18:] = False
+    faint = np.zeros_like(mask)
+    faint[10, 10] = True
+    tilt = np.array([np.sin(np.radians(20)), 0, np.cos(np.radians(20))]) - [0, 0, 1]
+    normals = np.where(black[..., None], unit(sphere.normals + tilt), sphere.normals).astype(np.float32)
+    lights, scales = sphere.light_directions, np.ones(sphere.n_images)
+    off = Preset(highlights=False, continue_black=False, continue_held=0.0)
+    kept, faint_out, shares = with_read_out_rules(sphere, normals, lights, scales, off, black, faint, None)
+    np.testing.assert_array_equal(kept, normals)
+    assert shares == {"highlight_share": None, "continued_held_share": None}
+    on = Preset(highlights=False, continue_black=True, continue_held=0.0)
+    continued, _, _ = with_read_out_rules(sphere, normals, lights, scales, on, black, faint, None)
+    np.testing.assert_array_equal(continued[mask & ~black], normals[mask & ~black])
+    np.testing.assert_allclose(continued[black],
+                               continue_surface(normals, mask, black, outline=on.continue_outline)[black])
+    assert angular_error(continued, sphere.normals)[black].mean() < 0.5 * 20     # from 20° off
+    assert faint.sum() == 1 and faint[10, 10]
+    assert not (faint_out & ~faint).any()
 
 
 def test_a_held_pixel_keeps_the_upsampled_fit_and_the_others_are_solved(caplog):
