@@ -422,7 +422,7 @@ def test_the_read_out_rules_continue_black_pixels_only_when_asked_and_leave_thei
     """:func:`unps.inverse.fit.with_read_out_rules` on a sphere's normals 20° off in a black band:
     with every rule off nothing moves and no share is reported; with ``continue_black`` the band
     is the surface continued across it, and nothing else moves. The faint mask it is given stays
-    as it was (the rules hand back their own)."""
+    as it was, though its one pixel, whose values follow Lambert's cosine, is not counted faint."""
     sphere = render_lambertian("sphere", size=32, n_lights=12, seed=2)
     mask = sphere.mask
     black = mask.copy()
@@ -433,17 +433,18 @@ def test_the_read_out_rules_continue_black_pixels_only_when_asked_and_leave_thei
     normals = np.where(black[..., None], unit(sphere.normals + tilt), sphere.normals).astype(np.float32)
     lights, scales = sphere.light_directions, np.ones(sphere.n_images)
     off = Preset(highlights=False, continue_black=False, continue_held=0.0)
-    kept, faint_out, shares = with_read_out_rules(sphere, normals, lights, scales, off, black, faint, None)
+    kept, shares = with_read_out_rules(sphere, normals, lights, scales, off, black, faint, None)
     np.testing.assert_array_equal(kept, normals)
-    assert shares == {"highlight_share": None, "continued_held_share": None}
+    assert shares["highlight_share"] is None and shares["continued_held_share"] is None
+    assert shares["black_share"] == pytest.approx(black.sum() / mask.sum())
+    assert shares["faint_share"] == 0                       # its values follow Lambert's cosine
     on = Preset(highlights=False, continue_black=True, continue_held=0.0)
-    continued, _, _ = with_read_out_rules(sphere, normals, lights, scales, on, black, faint, None)
+    continued, _ = with_read_out_rules(sphere, normals, lights, scales, on, black, faint, None)
     np.testing.assert_array_equal(continued[mask & ~black], normals[mask & ~black])
     np.testing.assert_allclose(continued[black],
                                continue_surface(normals, mask, black, outline=on.continue_outline)[black])
     assert angular_error(continued, sphere.normals)[black].mean() < 0.5 * 20     # from 20° off
     assert faint.sum() == 1 and faint[10, 10]
-    assert not (faint_out & ~faint).any()
 
 
 def test_a_held_pixel_keeps_the_upsampled_fit_and_the_others_are_solved(caplog):

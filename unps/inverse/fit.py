@@ -151,23 +151,9 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
             normals, image_noise = solved_per_pixel(cropped, normals, interreflected,
                                                     rendering["reflectance"], directions, scales,
                                                     work.mask, factor, ~clipped, held)
-        normals, faint, shares = with_read_out_rules(cropped, normals, directions, scales, preset, black,
-                                                     faint, held)
+        normals, shares = with_read_out_rules(cropped, normals, directions, scales, preset, black, faint,
+                                              held)
         normals, albedo = on_subject_grid(normals, cropped, subject, directions, scales)
-    black_share = float(black.sum() / cropped.mask.sum())
-    if black.any():
-        log.info("%.1f%% of the object is black in every image (no value above its two lowest "
-                 "levels): its normals are %s", 100 * black_share,
-                 "the surface continued from the pixels around it" if preset.continue_black else
-                 "the normal network's guess (preset.continue_black=false)")
-    faint_share = float(faint.sum() / cropped.mask.sum())
-    if faint.any():
-        log.info("%.1f%% of the object is faintly lit (no value above its %d lowest levels, more than the "
-                 "first in at most %.0f%% of the images, not following Lambert's cosine) and no "
-                 "highlight lights it: its normals are %s",
-                 100 * faint_share, FAINT_LEVELS, 100 * FAINT_SHARE,
-                 "the surface continued from the pixels around it" if preset.continue_black else
-                 "the fit's (preset.continue_black=false)")
     if bend is not None:
         log.info("interreflections bend the rendered normals by %.2f° on average (%.2f° at most)",
                  bend["mean"], bend["max"])
@@ -178,8 +164,8 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
             "interreflection": interreflection.enabled,
             "facet_downsample": solver.factor if solver else None,
             "interreflection_bend_deg": bend["mean"] if bend else None, "moved_from_start_deg": moved,
-            "black_share": black_share, "faint_share": faint_share, "image_noise": image_noise,
-            "dark_share": dark_share, "censored_share": censored_share, **shares}
+            "image_noise": image_noise, "dark_share": dark_share, "censored_share": censored_share,
+            **shares}
     rendering = Rendering(work.mask, work.images, rendering["reconstruction"], rendering["reflectance"])
     return Estimate(normals, albedo, light_directions=directions if refine_lights else None,
                     light_scales=scales if refine_lights else None, rendering=rendering, info=info)
@@ -285,7 +271,7 @@ def with_highlights(cropped: Subject, normals: np.ndarray, directions: np.ndarra
 
 def with_read_out_rules(cropped: Subject, normals: np.ndarray, directions: np.ndarray, scales: np.ndarray,
                         preset: Preset, black: np.ndarray, faint: np.ndarray,
-                        held: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, dict]:
+                        held: np.ndarray | None) -> tuple[np.ndarray, dict]:
     """The read-out's rules for the pixels whose own images pin their normals poorly (beyond the
     paper): those lit by a specular highlight take its half vector (``preset.highlights``); the
     surface is continued across the black ones and the faintly lit ones whose values hold no
@@ -301,10 +287,10 @@ def with_read_out_rules(cropped: Subject, normals: np.ndarray, directions: np.nd
         held: (H, W) bool, the pixels the fit held (:func:`held_from_solve`); None: none.
 
     Returns:
-        (H, W, 3) normals; (H, W) bool, the faintly lit pixels the surface was continued across
-        (no highlight lights them, their values hold no shading: :func:`unshaded`); and the shares
-        of the object lit by a highlight and of the held pixels moved (None where the rule is
-        off), keyed as in ``metrics.json``.
+        (H, W, 3) normals, and the shares of the object black in every image, faintly lit (no
+        highlight lights them, their values hold no shading: :func:`unshaded`), lit by a highlight
+        and held and moved (the last two None where their rule is off), keyed as in
+        ``metrics.json``.
     """
     mask = cropped.mask
     highlight_share, highlit = None, np.zeros_like(black)
@@ -325,7 +311,21 @@ def with_read_out_rules(cropped: Subject, normals: np.ndarray, directions: np.nd
     unlit = black | faint if preset.continue_black else none
     normals = with_surface_continued(normals, mask, unlit, unlit_held, preset.continue_held,
                                      preset.continue_outline)
-    return normals, faint, {"highlight_share": highlight_share, "continued_held_share": held_share}
+    black_share, faint_share = float(black.sum() / mask.sum()), float(faint.sum() / mask.sum())
+    if black.any():
+        log.info("%.1f%% of the object is black in every image (no value above its two lowest "
+                 "levels): its normals are %s", 100 * black_share,
+                 "the surface continued from the pixels around it" if preset.continue_black else
+                 "the normal network's guess (preset.continue_black=false)")
+    if faint.any():
+        log.info("%.1f%% of the object is faintly lit (no value above its %d lowest levels, more than the "
+                 "first in at most %.0f%% of the images, not following Lambert's cosine) and no "
+                 "highlight lights it: its normals are %s",
+                 100 * faint_share, FAINT_LEVELS, 100 * FAINT_SHARE,
+                 "the surface continued from the pixels around it" if preset.continue_black else
+                 "the fit's (preset.continue_black=false)")
+    return normals, {"black_share": black_share, "faint_share": faint_share,
+                     "highlight_share": highlight_share, "continued_held_share": held_share}
 
 
 def unshaded(shading: np.ndarray, lights: np.ndarray) -> np.ndarray:
