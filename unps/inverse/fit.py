@@ -10,7 +10,9 @@ albedo P; the networks are fitted for ``steps`` Adam steps
 (:class:`unps.inverse.system.InverseRendering`); the normals come back on the subject's own grid
 (from a working grid with the initialisation's finer detail added,
 :func:`unps.inverse.grids.upsample_with_detail`, then each pixel's solved from its own images under
-the fitted reflectance, :func:`unps.inverse.pixels.refine_pixel_normals`). With an output folder,
+the fitted reflectance, :func:`unps.inverse.pixels.refine_pixel_normals`, then the pixels their
+images pin poorly given highlights' half vectors or the surface around them,
+:func:`with_read_out_rules`). With an output folder,
 checkpoints land in ``checkpoints/`` every ``update_every`` steps and a rerun in the same folder resumes.
 """
 
