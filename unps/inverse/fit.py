@@ -94,27 +94,11 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
     log.info("unps (%s preset): working grid %d×%d (%d object pixels, ×%d coarser than the subject), "
              "%d images", preset.name, w, h, work.mask.sum(), factor, work.n_images)
 
-    observed = cropped.observed_images()
-    clipped = clipped_values(observed, cropped.mask)
-    black = black_everywhere(observed, cropped.mask)
-    faint = faintly_lit(observed, cropped.mask)
-    ceiling = zero_ceiling(observed, cropped.mask) if schedule.censor_black else None
-    headroom = (None if ceiling is None else
-                black_headroom(observed, cropped.mask, factor, ceiling, cropped.light_intensities))
-    del observed
-    censored_share = None if headroom is None else float((headroom[:, work.mask] > 0).mean())
-    if censored_share:
-        log.info("%.1f%% of the values on the working grid hold pixels read as 0, which stand for any "
-                 "light below the first level (%.2g of full scale): the loss charges a rendering there "
-                 "only for what it puts above that (preset.censor_black)", 100 * censored_share, ceiling)
-    usable = unclipped(clipped, cropped.mask, factor)
-    if usable is not None:
-        log.info("%d of %d values on the working grid hold clipped pixels and are left out of the fit",
-                 int((usable[:, work.mask] == 0).sum()), usable[:, work.mask].size)
+    values = values_read(cropped, work.mask, factor, schedule.censor_black)
     with stage("system assembly"):
         system, scale = build_system(work, light_directions, preset, interreflection, refine_lights,
-                                     fingerprint(work, light_directions, settings), usable, headroom,
-                                     device)
+                                     fingerprint(work, light_directions, settings), values.usable,
+                                     values.headroom, device)
     solver = system.interreflection
     dark_share = float((system.dark_weight > 0).sum() / system.mask.sum()) if schedule.dark_hold > 0 else None
     if dark_share:
@@ -152,9 +136,9 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
             interreflected = upsample_map(pseudo_normals - fitted, work.mask, cropped.mask.shape, factor)
             normals, image_noise = solved_per_pixel(cropped, normals, interreflected,
                                                     rendering["reflectance"], directions, scales,
-                                                    work.mask, factor, ~clipped, held)
-        normals, shares = with_read_out_rules(cropped, normals, directions, scales, preset, black, faint,
-                                              held)
+                                                    work.mask, factor, ~values.clipped, held)
+        normals, shares = with_read_out_rules(cropped, normals, directions, scales, preset, values.black,
+                                              values.faint, held)
         normals, albedo = on_subject_grid(normals, cropped, subject, directions, scales)
     if bend is not None:
         log.info("interreflections bend the rendered normals by %.2f° on average (%.2f° at most)",
@@ -166,11 +150,67 @@ def neural_inverse_rendering(subject: Subject, light_directions: np.ndarray, pre
             "interreflection": interreflection.enabled,
             "facet_downsample": solver.factor if solver else None,
             "interreflection_bend_deg": bend["mean"] if bend else None, "moved_from_start_deg": moved,
-            "image_noise": image_noise, "dark_share": dark_share, "censored_share": censored_share,
+            "image_noise": image_noise, "dark_share": dark_share, "censored_share": values.censored_share,
             **shares}
     rendering = Rendering(work.mask, work.images, rendering["reconstruction"], rendering["reflectance"])
     return Estimate(normals, albedo, light_directions=directions if refine_lights else None,
                     light_scales=scales if refine_lights else None, rendering=rendering, info=info)
+
+
+@dataclasses.dataclass(frozen=True)
+class ValuesRead:
+    """What a crop's values as captured say before the fit (:func:`values_read`).
+
+    Attributes:
+        clipped: (n, H, W) bool on the crop, the values the camera clipped
+            (:func:`unps.data.checks.clipped_values`).
+        black, faint: (H, W) bool on the crop, the pixels black in every image and the faintly lit
+            ones (:func:`unps.data.checks.black_everywhere`, :func:`unps.data.checks.faintly_lit`).
+        usable: (n, h, w) float32 on the working grid, 0 where a value holds a clipped pixel; None
+            when none does (:func:`unps.inverse.grids.unclipped`).
+        headroom: (n, h, w, 3) float32 on the working grid, how much brighter than read each value
+            may be (:func:`unps.inverse.grids.black_headroom`); None when nothing is censored.
+        censored_share: the share of the working grid's object values with headroom; None when
+            nothing is censored.
+    """
+
+    clipped: np.ndarray
+    black: np.ndarray
+    faint: np.ndarray
+    usable: np.ndarray | None
+    headroom: np.ndarray | None
+    censored_share: float | None
+
+
+def values_read(cropped: Subject, work_mask: np.ndarray, factor: int, censor_black: bool) -> ValuesRead:
+    """Read the crop's values as captured once (the stack before its division by the
+    intensities), for the fit (clipped and censored values) and its read-out (black and faint
+    pixels); the log says what the fit leaves out and what it bounds.
+
+    Args:
+        cropped: the subject's crop; work_mask: (h, w) its object on the working grid, ``factor``
+            times coarser.
+        censor_black: bound the values read as 0 by the light below the first level
+            (``preset.censor_black``; :func:`unps.data.checks.zero_ceiling`).
+    """
+    observed = cropped.observed_images()
+    clipped = clipped_values(observed, cropped.mask)
+    black = black_everywhere(observed, cropped.mask)
+    faint = faintly_lit(observed, cropped.mask)
+    ceiling = zero_ceiling(observed, cropped.mask) if censor_black else None
+    headroom = (None if ceiling is None else
+                black_headroom(observed, cropped.mask, factor, ceiling, cropped.light_intensities))
+    del observed
+    censored_share = None if headroom is None else float((headroom[:, work_mask] > 0).mean())
+    if censored_share:
+        log.info("%.1f%% of the values on the working grid hold pixels read as 0, which stand for any "
+                 "light below the first level (%.2g of full scale): the loss charges a rendering there "
+                 "only for what it puts above that (preset.censor_black)", 100 * censored_share, ceiling)
+    usable = unclipped(clipped, cropped.mask, factor)
+    if usable is not None:
+        log.info("%d of %d values on the working grid hold clipped pixels and are left out of the fit",
+                 int((usable[:, work_mask] == 0).sum()), usable[:, work_mask].size)
+    return ValuesRead(clipped, black, faint, usable, headroom, censored_share)
 
 
 def held_from_solve(system: InverseRendering, work_mask: np.ndarray, shape: tuple[int, int],
