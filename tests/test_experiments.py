@@ -1386,3 +1386,34 @@ def test_start_checks_prints_each_checks_peak_memory_time_and_finding(capsys):
     assert "0.50/255" in lines["zero_ceiling"]
     for check in ("black_everywhere", "faintly_lit"):
         assert "0.00% of the object" not in lines[check], printed
+
+
+def test_error_sources_sorts_pixels_into_outline_black_dark_shadowed_and_plain():
+    from test_highlights import cap
+
+    study = load_script("lb_error_sources", "experiments/light_benchmark/error_sources.py")
+    size = 64
+    rows, cols = np.mgrid[:size, :size].astype(np.float64)
+    depth = 25 * np.exp(-((rows - 32) ** 2 + (cols - 32) ** 2) / (2 * 4.0 ** 2))   # a tall bump on a plane
+    dz_dy, dz_dx = np.gradient(depth)                  # per row (y down) and per column
+    normals = np.stack([-dz_dx, dz_dy, np.ones_like(depth)], -1)
+    normals = (normals / np.linalg.norm(normals, axis=-1, keepdims=True)).astype(np.float32)
+    lights = cap(48, 60.0).astype(np.float32)
+    albedo = np.full((size, size), 0.8)
+    albedo[4:14, 4:14] = 0.05                          # a dark patch
+    albedo[4:14, 50:60] = 0.0                          # black in every image
+    images = albedo * np.clip(np.einsum("hwc,nc->nhw", normals, lights), 0, None)
+    images = (np.round(images * 255) / 255)[..., None].repeat(3, -1).astype(np.float32)
+    mask = np.ones((size, size), bool)
+
+    kind = study.pixel_kinds(images, mask, normals, lights, ring=2, dark=0.2, shadowed=0.1)
+    names = np.array(study.KINDS)[kind]
+    assert (names[:2] == "outline").all() and (names[:, -2:] == "outline").all()
+    assert (names[4:14, 50:60] == "black").all()
+    assert (names[4:14, 4:14] == "dark").all()
+    from_bump = np.hypot(rows - 32, cols - 32)
+    assert (names[(from_bump >= 10) & (from_bump < 12)] == "shadowed").all()   # the plane at its foot
+    assert (names[from_bump < 6] == "plain").all()     # the bump itself casts on nothing nearer
+    far = (from_bump > 18) & (albedo > 0.5)
+    far[:2], far[-2:], far[:, :2], far[:, -2:] = False, False, False, False
+    assert (names[far] == "plain").all()               # the plane far from it
