@@ -99,6 +99,35 @@ def without_pixels(subject: Subject) -> Subject:
     return subject.replace(images=np.broadcast_to(np.zeros((), np.float32), subject.images.shape))
 
 
+def read_subject(cfg: DictConfig) -> Subject:
+    """The subject ``cfg.subject`` names, read (timed as the ``reading`` stage) and checked.
+
+    Raises:
+        InputError: a value the subject needs is not given, or the images cannot be used
+            (:func:`unps.data.checks.usable_subject`).
+    """
+    missing = sorted(OmegaConf.missing_keys(cfg.subject))
+    if missing:
+        raise InputError("this subject needs " + ", ".join(f"{key}=…" for key in missing)
+                         + " on the command line (e.g. subject.root=<folder of images>)")
+    with stage("reading"):
+        subject = instantiate(cfg.subject, _partial_=True)()   # called here so errors reach the user
+    return usable_subject(subject)
+
+
+def with_fit_verdict(lights: Lights, directions: np.ndarray, scales: np.ndarray, truth: Subject) -> Lights:
+    """The lights the fit ended with: ``directions`` (n, 3) and ``lights``' intensities (ones if it
+    has none) times ``scales`` (n,), with the fit's verdict (how far it moved the directions, and
+    their error where ``truth`` is calibrated) after the light stages' verdicts."""
+    intensities = (lights.intensities if lights.intensities is not None
+                   else np.ones_like(lights.directions)) * scales[:, None]
+    moved = float(angular_error(directions, lights.directions).mean())
+    return record(Lights(directions, intensities.astype(np.float32), "refined",
+                         spread_deg=lights.spread_deg, verdicts=lights.verdicts),
+                  Verdict("fit", "changed", f"learnt with the surface; directions moved "
+                          f"{moved:.2f}° on average", {"moved_deg": moved}), truth)
+
+
 def run_fit(cfg: DictConfig, seconds: dict[str, float], warnings: list[str]) -> dict:
     """:func:`fit`'s body; ``seconds`` and ``warnings`` fill as it goes."""
     from lightning import seed_everything
@@ -113,14 +142,7 @@ def run_fit(cfg: DictConfig, seconds: dict[str, float], warnings: list[str]) -> 
     keep_freed_memory()
     out = Path(cfg.paths.output_dir)
     start = time.perf_counter()
-    missing = sorted(OmegaConf.missing_keys(cfg.subject))
-    if missing:
-        raise InputError("this subject needs " + ", ".join(f"{key}=…" for key in missing)
-                         + " on the command line (e.g. subject.root=<folder of images>)")
-    with stage("reading"):
-        subject = instantiate(cfg.subject, _partial_=True)()   # called here so errors reach the user
-    subject = usable_subject(subject)
-    subject, noise_reference = add_noise(subject, cfg.noise, seed=cfg.seed)
+    subject, noise_reference = add_noise(read_subject(cfg), cfg.noise, seed=cfg.seed)
     original = subject
     light_name, light_source = build(cfg.light)
     method_name, method = build(cfg.method, refine_lights=learns_lights(cfg.light, cfg.method))
@@ -146,13 +168,7 @@ def run_fit(cfg: DictConfig, seconds: dict[str, float], warnings: list[str]) -> 
         depth = integrate_normals(estimate.normals, subject.mask)
     runtime = time.perf_counter() - start
     if estimate.light_directions is not None:
-        intensities = (lights.intensities if lights.intensities is not None
-                       else np.ones_like(lights.directions)) * estimate.light_scales[:, None]
-        moved = float(angular_error(estimate.light_directions, lights.directions).mean())
-        lights = record(Lights(estimate.light_directions, intensities.astype(np.float32), "refined",
-                               spread_deg=lights.spread_deg, verdicts=lights.verdicts),
-                        Verdict("fit", "changed", f"learnt with the surface; directions moved "
-                                f"{moved:.2f}° on average", {"moved_deg": moved}), original)
+        lights = with_fit_verdict(lights, estimate.light_directions, estimate.light_scales, original)
         light_metrics = dict(lights.verdicts[-1].errors)
 
     metrics = {"study": cfg.get("study"), "seed": cfg.seed,
