@@ -19,6 +19,7 @@ from unps.data.diligent import find_diligent_object, read_diligent, read_diligen
 from unps.data.lights import Lights
 from unps.data.writer import write_diligent
 from unps.errors import InputError
+from unps.geometry import outline_distance
 from unps.fit import fit
 from unps.io.images import write_png8
 from unps.plan import expand, plan, print_plan
@@ -862,7 +863,7 @@ def test_outline_ring_splits_the_error_by_distance_to_the_outline(tmp_path, caps
     study = load_script("calibrated_outline_ring", "experiments/calibrated/outline_ring.py")
     diligent = diligent_object("pmsData/ballPNG").parents[1]
     ball = study.truth("ball", diligent, tmp_path, tmp_path)
-    ring = ball.mask & (study.outline_distance(ball.mask) <= 1)
+    ring = ball.mask & (outline_distance(ball.mask) <= 1)
     normals = np.where(ring[..., None], [0.0, 0.0, 1.0], ball.normals)
     (tmp_path / "ball-unps").mkdir()
     np.save(tmp_path / "ball-unps" / "normals.npy", normals)

@@ -234,6 +234,18 @@ OUTWARD_SMOOTHING = 2.0
 """σ in pixels of the Gaussian over the signed distance in :func:`outward_directions`."""
 
 
+def outline_distance(mask: np.ndarray) -> np.ndarray:
+    """(H, W) each object pixel's distance to the nearest pixel off the object, the image's frame
+    counting as off it (1 on the outline, 0 off the object).
+
+    >>> outline_distance(np.pad(np.ones((3, 3), bool), 1))[1:4, 1:4].tolist()
+    [[1.0, 1.0, 1.0], [1.0, 2.0, 1.0], [1.0, 1.0, 1.0]]
+    >>> outline_distance(np.ones((1, 3), bool)).tolist()        # on the frame's edge
+    [[1.0, 1.0, 1.0]]
+    """
+    return distance_transform_edt(np.pad(mask, 1))[1:-1, 1:-1]
+
+
 def outward_directions(mask: np.ndarray) -> np.ndarray:
     """(H, W, 2) unit (x, y) directions out of the object, across its outline: the negated
     gradient of the signed distance to the outline, smoothed over two pixels (σ) so that a

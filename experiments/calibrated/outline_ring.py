@@ -20,9 +20,9 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from scipy.ndimage import distance_transform_edt
 
 from unps.data.diligent import read_diligent, read_diligent_object
+from unps.geometry import outline_distance
 from unps.metrics import angular_error
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "light_benchmark"))
@@ -32,15 +32,6 @@ DILIGENT = ("ball", "cat", "pot1")
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
 DEFAULT_CACHE = Path("~/.cache/unps/light_benchmark").expanduser()
 BANDS = ((0, 1), (1, 2), (2, 4), (4, np.inf))
-
-
-def outline_distance(mask: np.ndarray) -> np.ndarray:
-    """(H, W) each object pixel's distance to the nearest pixel off the object (1 on the outline).
-
-    >>> outline_distance(np.pad(np.ones((3, 3), bool), 1))[1:4, 1:4].tolist()
-    [[1.0, 1.0, 1.0], [1.0, 2.0, 1.0], [1.0, 1.0, 1.0]]
-    """
-    return distance_transform_edt(np.pad(mask, 1))[1:-1, 1:-1]
 
 
 def elevation(normals: np.ndarray) -> np.ndarray:

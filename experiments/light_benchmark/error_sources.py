@@ -32,11 +32,10 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from scipy.ndimage import distance_transform_edt
 
 from unps.data.checks import black_everywhere, faintly_lit
 from unps.data.diligent import read_diligent
-from unps.geometry import cast_shadows, integrate_normals
+from unps.geometry import cast_shadows, integrate_normals, outline_distance
 from unps.metrics import angular_error
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -72,7 +71,7 @@ def pixel_kinds(observed: np.ndarray, mask: np.ndarray, normals: np.ndarray, lig
                           torch.from_numpy(lights).float(), 1.0, MARCH_STEPS).numpy()
     shadow_share = (hidden & facing).sum(0) / np.maximum(facing.sum(0), 1)
     tests = {
-        "outline": distance_transform_edt(np.pad(mask, 1))[1:-1, 1:-1] <= ring,   # the frame's edge too
+        "outline": outline_distance(mask) <= ring,
         "black": black_everywhere(observed, mask) | faintly_lit(observed, mask),
         "dark": brightness < dark * np.median(brightness[mask]),
         "shadowed": shadow_share > shadowed,

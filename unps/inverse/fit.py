@@ -24,7 +24,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from scipy.ndimage import distance_transform_edt
 
 from unps.data.checks import (FAINT_LEVELS, FAINT_SHARE, black_everywhere, clipped_values, faintly_lit,
                                zero_ceiling)
@@ -32,7 +31,7 @@ from unps.data.estimate import Estimate, Rendering
 from unps.data.subject import Subject
 from unps.device import native_bfloat16, resolve_device
 from unps.errors import InputError
-from unps.geometry import continue_surface
+from unps.geometry import continue_surface, outline_distance
 from unps.inverse.control import fingerprint, train
 from unps.inverse.grids import (black_headroom, on_subject_grid, unclipped, upsample_map,
                                upsample_with_detail, working_factor)
@@ -492,7 +491,7 @@ def highlit_images(work: Subject, light_directions: np.ndarray) -> np.ndarray:
     shading = work.images[:, work.mask].mean(-1)
     _, lit = highlight_normals(shading, light_directions)
     gap = HIGHLIGHT_OUTLINE_GAP * np.sqrt(max(work.mask.sum() / GAP_REFERENCE_PIXELS, 1.0))
-    lit &= distance_transform_edt(np.pad(work.mask, 1))[1:-1, 1:-1][work.mask] >= gap
+    lit &= outline_distance(work.mask)[work.mask] >= gap
     index = np.full(work.mask.shape, -1, np.int64)
     index[work.mask] = np.where(lit, shading.argmax(0), -1)
     if lit.any():
