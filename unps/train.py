@@ -98,6 +98,64 @@ def initial_weights(net, path: str, cfg: DictConfig):
     return net
 
 
+def resumed_run(cfg: DictConfig, overrides: Sequence[str]) -> tuple[DictConfig, int]:
+    """The config to train with and the step to start from: ``cfg`` and 0 for a new run; for
+    ``cfg.ckpt_path``, the config saved in that checkpoint (:func:`resumed_config`) and its step.
+
+    Raises:
+        InputError: the checkpoint is missing or is not a ``unps.train`` one.
+    """
+    if not cfg.ckpt_path:
+        return cfg, 0
+    ckpt = Path(cfg.ckpt_path).expanduser()
+    if not ckpt.is_file():
+        raise InputError(f"{ckpt}: checkpoint to resume from not found")
+    checkpoint = torch.load(ckpt, map_location="cpu", weights_only=False)
+    saved, start_step = checkpoint.get("unps_config"), checkpoint.get("global_step", 0)
+    if saved is None:
+        raise InputError(f"{ckpt}: not a unps.train checkpoint (no unps_config inside)")
+    log.info("resuming from %s at step %d with the config saved in it", ckpt, start_step)
+    cfg = OmegaConf.merge(resumed_config(saved, cfg, overrides),
+                          {"paths": {"output_dir": str(Path(cfg.paths.output_dir))}, "ckpt_path": str(ckpt)})
+    return cfg, start_step
+
+
+def checked_precision(cfg: DictConfig) -> str:
+    """``cfg.recipe.precision`` (float32 for runs saved before the option), once the seed and it
+    are checked.
+
+    Raises:
+        InputError: a seed that is not a whole number, or a precision not in :data:`PRECISIONS`.
+    """
+    if isinstance(cfg.seed, bool) or not isinstance(cfg.seed, int):
+        raise InputError(f"seed must be a whole number, got {cfg.seed!r}")
+    precision = cfg.recipe.get("precision", "32-true")
+    if precision not in PRECISIONS:
+        raise InputError(f"recipe.precision must be one of {', '.join(PRECISIONS)}; got {precision!r}")
+    return precision
+
+
+def light_trainer(cfg: DictConfig, out: Path, device: torch.device, precision: str, callbacks: list):
+    """The Lightning trainer of a run: validation every ``recipe.val_every`` steps, the best and
+    the last checkpoints, TensorBoard in ``out``, ``callbacks`` after those."""
+    import lightning as L
+    from lightning.pytorch.callbacks import ModelCheckpoint
+    from lightning.pytorch.loggers import TensorBoardLogger
+
+    return L.Trainer(
+        max_steps=cfg.recipe.max_steps, max_time=cfg.recipe.max_time,
+        val_check_interval=cfg.recipe.val_every, check_val_every_n_epoch=None,
+        default_root_dir=out, logger=TensorBoardLogger(str(out), name="tensorboard", version=""),
+        callbacks=[ModelCheckpoint(dirpath=out / "checkpoints", monitor="val/direction_mae", mode="min",
+                                   save_top_k=1, filename="best"),
+                   ModelCheckpoint(dirpath=out / "checkpoints", save_last=True, save_top_k=0,
+                                   every_n_train_steps=cfg.recipe.val_every),
+                   *callbacks],
+        **trainer_placement(device), precision=precision,
+        log_every_n_steps=cfg.recipe.log_every,
+        enable_progress_bar=False, enable_model_summary=False, deterministic=False)
+
+
 def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
     """Train (or resume) and return the final validation metrics.
 
@@ -107,8 +165,7 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
             :data:`MAY_CHANGE` extend the run and any other change is refused.
     """
     import lightning as L
-    from lightning.pytorch.callbacks import LearningRateMonitor, ModelCheckpoint
-    from lightning.pytorch.loggers import TensorBoardLogger
+    from lightning.pytorch.callbacks import LearningRateMonitor
     from unps.inverse.callbacks import ProgressLog
     from unps.inverse.control import LIGHTNING_NOISE
     from unps.io.files import write_json
@@ -117,23 +174,8 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
     from unps.lightnet.system import LightEstimation
 
     out = Path(cfg.paths.output_dir)
-    start_step = 0
-    if cfg.ckpt_path:
-        ckpt = Path(cfg.ckpt_path).expanduser()
-        if not ckpt.is_file():
-            raise InputError(f"{ckpt}: checkpoint to resume from not found")
-        checkpoint = torch.load(ckpt, map_location="cpu", weights_only=False)
-        saved, start_step = checkpoint.get("unps_config"), checkpoint.get("global_step", 0)
-        if saved is None:
-            raise InputError(f"{ckpt}: not a unps.train checkpoint (no unps_config inside)")
-        log.info("resuming from %s at step %d with the config saved in it", ckpt, start_step)
-        cfg = OmegaConf.merge(resumed_config(saved, cfg, overrides),
-                              {"paths": {"output_dir": str(out)}, "ckpt_path": str(ckpt)})
-    if isinstance(cfg.seed, bool) or not isinstance(cfg.seed, int):
-        raise InputError(f"seed must be a whole number, got {cfg.seed!r}")
-    precision = cfg.recipe.get("precision", "32-true")   # runs saved before the option lack it
-    if precision not in PRECISIONS:
-        raise InputError(f"recipe.precision must be one of {', '.join(PRECISIONS)}; got {precision!r}")
+    cfg, start_step = resumed_run(cfg, overrides)
+    precision = checked_precision(cfg)
     L.seed_everything(cfg.seed, workers=True, verbose=False)
     torch.set_num_threads(cfg.recipe.threads or torch.get_num_threads())
     device = resolve_device(cfg.get("device", "auto"))   # runs saved before the option lack it
@@ -147,19 +189,9 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
                              lr_gamma=cfg.recipe.lr_gamma, soft_decode=cfg.soft_decode,
                              config=OmegaConf.to_container(cfg, resolve=True))
     rate = SampleRate(skip=min(5, cfg.recipe.max_steps // 2))
-    trainer = L.Trainer(
-        max_steps=cfg.recipe.max_steps, max_time=cfg.recipe.max_time,
-        val_check_interval=cfg.recipe.val_every, check_val_every_n_epoch=None,
-        default_root_dir=out, logger=TensorBoardLogger(str(out), name="tensorboard", version=""),
-        callbacks=[ModelCheckpoint(dirpath=out / "checkpoints", monitor="val/direction_mae", mode="min",
-                                   save_top_k=1, filename="best"),
-                   ModelCheckpoint(dirpath=out / "checkpoints", save_last=True, save_top_k=0,
-                                   every_n_train_steps=cfg.recipe.val_every),
-                   LightSamples(), LearningRateMonitor(), rate,
-                   ProgressLog(shown=PROGRESS, logger=log, after_validation=True)],
-        **trainer_placement(device), precision=precision,
-        log_every_n_steps=cfg.recipe.log_every,
-        enable_progress_bar=False, enable_model_summary=False, deterministic=False)
+    progress = ProgressLog(shown=PROGRESS, logger=log, after_validation=True)
+    callbacks = [LightSamples(), LearningRateMonitor(), rate, progress]
+    trainer = light_trainer(cfg, out, device, precision, callbacks)
     log.info("training %s on %s (%s), %d threads: %d steps of %d samples (%d px, %d images), at most %s; "
              "%s; run folder %s", type(net).__name__, describe(device), precision, torch.get_num_threads(),
              cfg.recipe.max_steps, cfg.recipe.batch_size, cfg.recipe.resolution, cfg.recipe.images,
