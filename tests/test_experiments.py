@@ -1418,3 +1418,27 @@ def test_error_sources_sorts_pixels_into_outline_black_dark_shadowed_and_plain()
     far = (from_bump > 18) & (albedo > 0.5)
     far[:2], far[-2:], far[:, :2], far[:, -2:] = False, False, False, False
     assert (names[far] == "plain").all()               # the plane far from it
+
+
+def test_diffuse_maxima_undo_a_bas_relief_of_a_lambertian_spheres_lights():
+    study = load_script("lb_diffuse_maxima", "experiments/light_benchmark/diffuse_maxima.py")
+    from unps.metrics import angular_error
+
+    size = 96
+    rows, cols = np.mgrid[:size, :size]
+    x, y = (cols - 47.5) / 45, (47.5 - rows) / 45
+    mask = x ** 2 + y ** 2 < 1
+    normals = np.stack([x, y, np.sqrt(np.clip(1 - x ** 2 - y ** 2, 0, 1))], -1)[mask]
+    lights = np.random.default_rng(0).normal(size=(40, 3))
+    lights[:, 2] = np.abs(lights[:, 2]) + 1.0
+    lights /= np.linalg.norm(lights, axis=1, keepdims=True)
+    gray = np.clip(lights @ normals.T, 0, None)                        # (n, m), shadows clamped
+    p = study.bas_relief(0.3, -0.2, 1.0)
+    wrong = lights @ np.linalg.inv(p)                                   # the lights under a bas-relief
+    assert angular_error(wrong, lights).mean() > 4.0
+    scaled = study.trimmed_scaled_normals(gray, wrong, (0.3, 0.9))
+    images, found = study.diffuse_maxima(gray, scaled, mask, albedo_spread=0.05, bright=0.5)
+    assert len(images) >= 20
+    for plane in (False, True):
+        undone = wrong @ np.linalg.inv(study.pinned_bas_relief(found, wrong[images], plane))
+        assert angular_error(undone, lights).mean() < 1.0
