@@ -45,7 +45,7 @@ from benchmark import DEFAULT_CACHE, DEFAULT_DATA, DEFAULT_GROUPS, GROUPS, cases
 from scenes import LIGHT_SETS  # noqa: E402
 
 WINDOW = 7              # pixels: a maximum is the brightest of its WINDOW × WINDOW neighbours
-SMOOTH_PX = 2.0         # the scaled normals are smoothed (Gaussian σ, pixels) before the maxima are read
+SMOOTH_PX = 2.0         # the images and the scaled normals are smoothed (Gaussian σ, pixels)
 CAP_DEG = 15.0          # an angle between a maximum's normal and its light counts at most this
 
 
@@ -89,7 +89,7 @@ def diffuse_maxima(gray: np.ndarray, scaled: np.ndarray, mask: np.ndarray,
     return np.concatenate(images), np.concatenate(found).reshape(-1, 3)
 
 
-def out_of_plane(p: np.ndarray, normals: np.ndarray, lights: np.ndarray, plane: bool) -> float:
+def maxima_misfit(p: np.ndarray, normals: np.ndarray, lights: np.ndarray, plane: bool) -> float:
     """Mean angle (degrees, each capped at CAP_DEG) between (k, 3) scaled ``normals`` turned by P
     (b' = P·b) and the (k, 3) ``lights`` they face, turned by P⁻ᵀ; with ``plane``, only the
     normal's angle out of the plane of its light and the view."""
@@ -107,10 +107,10 @@ def pinned_bas_relief(normals: np.ndarray, lights: np.ndarray, plane: bool) -> n
     """The (3, 3) P bringing the maxima's normals nearest their lights: (μ, ν, λ), or with
     ``plane`` (μ, ν) into the plane of each light and the view (λ = 1, which that leaves free)."""
     if plane:
-        cost = lambda x: out_of_plane(bas_relief(x[0], x[1], 1.0), normals, lights, True)  # noqa: E731
+        cost = lambda x: maxima_misfit(bas_relief(x[0], x[1], 1.0), normals, lights, True)  # noqa: E731
         x = minimize(cost, np.zeros(2), method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-4}).x
         return bas_relief(x[0], x[1], 1.0)
-    cost = lambda x: out_of_plane(bas_relief(x[0], x[1], np.exp(x[2])), normals, lights, False)  # noqa: E731
+    cost = lambda x: maxima_misfit(bas_relief(x[0], x[1], np.exp(x[2])), normals, lights, False)  # noqa: E731
     x = minimize(cost, np.zeros(3), method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-4}).x
     return bas_relief(x[0], x[1], np.exp(x[2]))
 
@@ -156,9 +156,9 @@ def main() -> None:
         p = pinned_bas_relief(normals, net[images], args.plane)
         turned = net @ np.linalg.inv(p)
         errors = [float(angular_error(d, subject.light_directions).mean()) for d in (net, turned)]
-        fits = (out_of_plane(np.eye(3), normals, net[images], args.plane),
-                out_of_plane(p, normals, net[images], args.plane),
-                out_of_plane(np.eye(3), true_normals, true[true_images], args.plane))
+        fits = (maxima_misfit(np.eye(3), normals, net[images], args.plane),
+                maxima_misfit(p, normals, net[images], args.plane),
+                maxima_misfit(np.eye(3), true_normals, true[true_images], args.plane))
         rows.append((group, label, *errors, fits))
         print(f"{f'{group}-{name}-{label}':<28} {errors[0]:7.2f}° {errors[1]:7.2f}° {len(images):7d}   "
               f"{fits[0]:25.2f}° {fits[1]:6.2f}° {fits[2]:5.2f}°", flush=True)
