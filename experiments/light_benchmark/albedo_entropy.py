@@ -20,7 +20,6 @@ network's and the chosen lights. None of it feeds training.
 
 from __future__ import annotations
 
-import argparse
 import logging
 import sys
 from pathlib import Path
@@ -31,8 +30,7 @@ from unps.metrics import angular_error
 from unps.solvers.rpca import partial_sum_rpca
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from benchmark import DEFAULT_CACHE, DEFAULT_DATA, DEFAULT_GROUPS, GROUPS, cases, light_source  # noqa: E402
-from scenes import LIGHT_SETS  # noqa: E402
+from benchmark import case_parser, cases, light_source  # noqa: E402
 
 BIN_EDGES = np.linspace(-3.0, 3.0, 601)      # log albedo, relative to the median
 PARZEN_SIGMA = 0.05
@@ -75,11 +73,7 @@ def least_entropy(scaled: np.ndarray, shear: float, scale: float) -> tuple[float
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
-    parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
-    parser.add_argument("--only", nargs="+", choices=GROUPS, default=list(DEFAULT_GROUPS))
-    parser.add_argument("--sets", nargs="+", choices=list(LIGHT_SETS), default=list(LIGHT_SETS))
+    parser = case_parser(__doc__.split("\n")[0])
     parser.add_argument("--shear", type=float, default=0.6, help="the grid's largest |μ|, |ν|")
     parser.add_argument("--scale", type=float, default=0.7, help="the grid's largest |log λ|")
     args = parser.parse_args()
@@ -87,7 +81,7 @@ def main() -> None:
     network, _ = light_source([], [])
     print(f"{'case':<28} {'network':>8} {'least H':>8}   entropy: {'true':>6} {'network':>7} {'least':>6}")
     rows = []
-    for group, name, label, read in cases(args.only, args.sets, args.data, args.cache):
+    for group, name, label, read in cases(args.only, args.sets, args.data, args.cache, args.names):
         subject = read()
         lights = network(subject)
         gray = subject.observed_images()[:, subject.mask].mean(-1)                     # (n, m)

@@ -100,16 +100,24 @@ def cases(groups, sets, data: Path, cache: Path, names=None, bounces: int = scen
                 yield "synthetic", name, str(100), lambda name=name: synthetic(name)
 
 
-def study_parser(description: str, out_help: str, groups=DEFAULT_GROUPS) -> argparse.ArgumentParser:
-    """The command line the light benchmark's studies share: where the data, captures and results
-    are, which cases (``groups`` by default), ``--report`` and ``--threads`` (default 1)."""
+def case_parser(description: str, groups=DEFAULT_GROUPS) -> argparse.ArgumentParser:
+    """A command line that picks the benchmark's cases: where the data and captures are, which
+    groups (``groups`` by default), light sets and objects (``--data``, ``--cache``, ``--only``,
+    ``--sets``, ``--names``; :func:`cases` takes them)."""
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
     parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
-    parser.add_argument("--out", type=Path, default=None, help=out_help)
     parser.add_argument("--only", nargs="+", choices=GROUPS, default=list(groups))
     parser.add_argument("--sets", nargs="+", choices=list(scenes.LIGHT_SETS), default=list(scenes.LIGHT_SETS))
     parser.add_argument("--names", nargs="*", help="only these objects or subjects")
+    return parser
+
+
+def study_parser(description: str, out_help: str, groups=DEFAULT_GROUPS) -> argparse.ArgumentParser:
+    """The command line the light benchmark's studies share: :func:`case_parser`'s, where the
+    results are, ``--report`` and ``--threads`` (default 1)."""
+    parser = case_parser(description, groups)
+    parser.add_argument("--out", type=Path, default=None, help=out_help)
     parser.add_argument("--report", action="store_true", help="print the tables from the cases run so far")
     parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
     return parser

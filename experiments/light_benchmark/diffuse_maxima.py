@@ -28,7 +28,6 @@ images hold the cue, the true lights' is near 0 and the least). None of it feeds
 
 from __future__ import annotations
 
-import argparse
 import logging
 import sys
 from pathlib import Path
@@ -41,8 +40,7 @@ from unps.metrics import angular_error
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from albedo_entropy import bas_relief  # noqa: E402
-from benchmark import DEFAULT_CACHE, DEFAULT_DATA, DEFAULT_GROUPS, GROUPS, cases, light_source  # noqa: E402
-from scenes import LIGHT_SETS  # noqa: E402
+from benchmark import case_parser, cases, light_source  # noqa: E402
 
 WINDOW = 7              # pixels: a maximum is the brightest of its WINDOW × WINDOW neighbours
 SMOOTH_PX = 2.0         # the images and the scaled normals are smoothed (Gaussian σ, pixels)
@@ -116,12 +114,7 @@ def pinned_bas_relief(normals: np.ndarray, lights: np.ndarray, plane: bool) -> n
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
-    parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
-    parser.add_argument("--only", nargs="+", choices=GROUPS, default=list(DEFAULT_GROUPS))
-    parser.add_argument("--sets", nargs="+", choices=list(LIGHT_SETS), default=list(LIGHT_SETS))
-    parser.add_argument("--names", nargs="*", help="only these objects or subjects")
+    parser = case_parser(__doc__.split("\n")[0])
     parser.add_argument("--albedo-spread", type=float, default=0.05,
                         help="largest relative spread of the albedos around a maximum")
     parser.add_argument("--keep", type=float, nargs=2, default=(0.3, 0.9),
