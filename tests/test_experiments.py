@@ -14,9 +14,10 @@ from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
 from hydra.core.override_parser.overrides_parser import OverridesParser
 
 from conftest import SHARED_DATA, diligent_object, load_script
-from unps.data.analytic import render_lambertian
+from unps.data.analytic import dome_lights, height_field, render_lambertian
 from unps.data.diligent import find_diligent_object, read_diligent, read_diligent_object, read_folder
 from unps.data.lights import Lights
+from unps.data.subject import Subject
 from unps.data.writer import write_diligent
 from unps.errors import InputError
 from unps.geometry import outline_distance
@@ -1282,6 +1283,31 @@ def test_light_benchmark_refuses_fewer_than_two_bounces_by_name(tmp_path, capsys
     assert stop.value.code == 2
     assert "--bounces is the path tracer's longest path, at least 2 (direct light), got 1" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_rooms_light_is_the_same_in_every_captured_image_and_scales_with_the_albedo(tmp_path, monkeypatch):
+    """``--room-light``: the light added is the same in each image before the lamps' intensities
+    divide it, ``level`` × the captures' 99th percentile on average over the object, in
+    proportion to each pixel's albedo; the cases hand over subjects with it added."""
+    benchmark = load_script("lb_benchmark", "experiments/light_benchmark/benchmark.py")
+    rng = np.random.default_rng(0)
+    depth, normals, mask = height_field("sphere", 24, seed=0)
+    lights = dome_lights(12, seed=2)
+    albedo = np.where(np.arange(24)[None, :, None] < 12, 0.8, 0.2) * np.ones((24, 24, 3))
+    intensities = rng.uniform(0.5, 1.5, (12, 3)).astype(np.float32)
+    images = albedo[None] * np.clip(np.einsum("hwc,nc->nhw", normals, lights), 0, None)[..., None] * mask[..., None]
+    subject = Subject("sphere", images.astype(np.float32), mask, lights, intensities, normals=normals)
+    lit = benchmark.with_room_light(subject, 0.02)
+    added = (lit.observed_images() - subject.observed_images())[:, mask]           # (12, m, 3)
+    np.testing.assert_allclose(added, np.broadcast_to(added[:1], added.shape), atol=1e-6)
+    p99 = np.percentile(subject.observed_images()[:, mask].mean(-1), 99)
+    assert added.mean() == pytest.approx(0.02 * p99, rel=0.02)
+    bright, dark = added[0, albedo[mask][:, 0] > 0.5].mean(), added[0, albedo[mask][:, 0] < 0.5].mean()
+    assert bright / dark == pytest.approx(4.0, rel=0.05)
+    assert np.all(lit.images[:, ~mask] == 0)
+    monkeypatch.setattr(benchmark, "_cases", lambda *args: iter([("diligent", "sphere", "12", lambda: subject)]))
+    (_, _, _, read), = benchmark.cases(["diligent"], ["12"], tmp_path, tmp_path, room_light=0.02)
+    np.testing.assert_allclose(read().images, lit.images)
 
 
 def test_lamps_study_evens_out_each_lamps_brightness_and_colour_from_its_true_intensity():

@@ -21,7 +21,8 @@ from unps.lightnet.materials import MaterialBank, coated, darkened
 from unps.lightnet.rig import FORMATS, LAYOUTS, Camera, draw_lights, expose, quantize, record, stack_noise
 from unps.lightnet.shapes import GROOVE_LENGTH, GROOVE_WIDTH, SHAPES, groove_depth, sample_generator
 from unps.lightnet.data import Draws, LightData, loader_workers
-from unps.lightnet.synthesis import LightDataset, SceneBatch, map_tensors, render, render_batch
+from unps.lightnet.synthesis import (ROOM_LIGHT_MAX, LightDataset, SceneBatch, map_tensors, render,
+                                     render_batch, with_room_light)
 
 
 def concave_share(depth: torch.Tensor, mask: torch.Tensor) -> float:
@@ -315,6 +316,43 @@ def test_narrowed_intensities_draw_stacks_from_equal_lamps_to_the_whole_range():
     assert sum(r < 2.5 for r in half_ratios) not in (0, 24)
     with pytest.raises(InputError, match="narrowed_intensities is a share"):
         LightDataset(2, resolution=32, narrowed_intensities=1.5)
+
+
+def test_a_room_adds_the_same_light_to_every_captured_image():
+    """The room's light is the same in every image before the lights' intensities divide it, and
+    its level the stack's mean image (each divided by its light's) times the level drawn."""
+    g = torch.Generator().manual_seed(0)
+    images, intensities = torch.rand(2, 5, 3, 8, 8, generator=g), 0.2 + torch.rand(2, 5, generator=g)
+    level = torch.tensor([0.0, 0.03])
+    lit = with_room_light(images, intensities, level)
+    added = lit - images                                                          # (2, 5, 3, 8, 8)
+    assert torch.equal(added[0], torch.zeros_like(added[0]))
+    torch.testing.assert_close(added[1], added[1, :1].expand_as(added[1]))
+    torch.testing.assert_close(added[1, 0], 0.03 * (images[1] / intensities[1, :, None, None, None]).mean(0))
+    torch.testing.assert_close(with_room_light(images[1], intensities[1], level[1]), lit[1])
+
+
+def test_room_light_draws_a_level_for_its_share_of_the_samples_and_the_batch_renders_it_as_alone():
+    common = dict(resolution=32, images=6, camera=None, seed=4)
+    plain, lit = LightDataset(16, **common), LightDataset(16, room_light=1.0, **common)
+    assert all(plain.draw(i).room == 0 for i in range(16))
+    rooms = [lit.draw(i).room for i in range(16)]
+    assert all(0 < room <= ROOM_LIGHT_MAX for room in rooms)
+    for index in range(16):
+        torch.testing.assert_close(plain.draw(index).lights, lit.draw(index).lights)
+    half = [LightDataset(16, room_light=0.5, **common).draw(i).room for i in range(16)]
+    assert sum(room > 0 for room in half) not in (0, 16)
+    scenes = [lit.draw(i) for i in range(4)]
+    alone = default_collate([render(scene, torch.device("cpu")) for scene in scenes])
+    assert_same_stacks(render_batch(SceneBatch.of(scenes), torch.device("cpu"))["images"], alone["images"])
+    inside = scenes[0].maps.mask
+    noise = scenes[0].perturbation[:, :, inside]
+    dark = render(dataclasses.replace(scenes[0], room=0.0), torch.device("cpu"))["images"][:, :, inside]
+    unlit = (dark - noise).abs() < 1e-7                                           # no light at all
+    assert unlit.float().mean() > 0.05
+    assert ((alone["images"][0][:, :, inside] - dark)[unlit] > 0).float().mean() > 0.9
+    with pytest.raises(InputError, match="room_light is a share"):
+        LightDataset(2, resolution=32, room_light=2.0)
 
 
 def test_a_darkened_material_keeps_its_lobes():

@@ -5,6 +5,7 @@
     python experiments/light_benchmark/benchmark.py --stages reversal contour selfcal
     python experiments/light_benchmark/benchmark.py --set selfcal.gbr_weight=0.1 --tag gbr01
     python experiments/light_benchmark/benchmark.py --only benchmark --bounces 2 --tag direct-only
+    python experiments/light_benchmark/benchmark.py --room-light 0.01 --tag room0.01
 
 The cases (none of them feeds training):
 
@@ -26,6 +27,10 @@ The cases (none of them feeds training):
 
 ``--bounces 2`` renders the first three groups' objects with the direct light alone, cast shadows
 included and no interreflection (cached apart): what the stages would give if there were none.
+``--room-light L`` adds to every case the light of a room no dark frame took out
+(:func:`with_room_light`): the same in every captured image, L × the captures' 99th percentile
+at the object's mean albedo, as photographs outside a blacked-out rig hold (DiLiGenT's ball holds
+about 1 % of its 99th percentile in its attached shadows).
 
 Each case runs ``light=estimated`` as ``python -m unps.fit`` does (the network, then the stages
 of ``--stages``, default those of ``light=selfcal``; ``--set`` overrides their settings as on the
@@ -52,6 +57,7 @@ import numpy as np
 from unps.data.catalogue import subjects
 from unps.data.diligent import read_diligent, read_diligent_object
 from unps.errors import InputError
+from unps.solvers.woodham import rgb_albedo
 from unps.timing import recording
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -66,9 +72,38 @@ DEFAULT_GROUPS = ("benchmark", "diligent", "synthetic")
 RAISED, RAISED_TWICE = 1.0, 2.0     # degrees: a stage that raised the error by more is flagged
 
 
-def cases(groups, sets, data: Path, cache: Path, names=None, bounces: int = scenes.BOUNCES):
+def with_room_light(subject, level: float):
+    """``subject`` as if the room lit it too, as a dark frame nobody subtracted would leave it: to
+    every captured image the same light, ``level`` × the captures' 99th percentile (object pixels,
+    grey) × each pixel's Lambertian albedo (least squares with the true normals and lights) over
+    the object's mean albedo — a uniform surround, unoccluded, added after the capture was stored.
+    The images stay divided by the lights' intensities."""
+    mask = subject.mask
+    captured = subject.observed_images()
+    albedo = rgb_albedo(subject.images[:, mask], subject.normals[mask], subject.light_directions)
+    if subject.light_intensities is not None:
+        albedo = albedo * subject.light_intensities.mean(0)
+    room = level * np.percentile(captured[:, mask].mean(-1), 99) * albedo / albedo.mean()
+    lit = captured.copy()
+    lit[:, mask] += room[None]
+    if subject.light_intensities is not None:
+        lit = lit / subject.light_intensities[:, None, None, :]
+    return subject.replace(images=lit.astype(np.float32))
+
+
+def cases(groups, sets, data: Path, cache: Path, names=None, bounces: int = scenes.BOUNCES,
+          room_light: float = 0.0):
     """(group, name, light set, function reading the subject) for every case asked for, the
-    rendered objects' interreflections traced to ``bounces`` (2: none)."""
+    rendered objects' interreflections traced to ``bounces`` (2: none), with a room's light of
+    ``room_light`` (:func:`with_room_light`; 0: none added)."""
+    for group, name, label, read in _cases(groups, sets, data, cache, names, bounces):
+        if room_light:
+            yield group, name, label, lambda read=read: with_room_light(read(), room_light)
+        else:
+            yield group, name, label, read
+
+
+def _cases(groups, sets, data: Path, cache: Path, names, bounces: int):
     for group, objects in (("benchmark", scenes.OBJECTS), ("single", scenes.SINGLE_MATERIAL),
                            ("diligent-rig", scenes.ON_DILIGENT_RIG)):
         if group not in groups:
@@ -110,6 +145,9 @@ def case_parser(description: str, groups=DEFAULT_GROUPS) -> argparse.ArgumentPar
     parser.add_argument("--only", nargs="+", choices=GROUPS, default=list(groups))
     parser.add_argument("--sets", nargs="+", choices=list(scenes.LIGHT_SETS), default=list(scenes.LIGHT_SETS))
     parser.add_argument("--names", nargs="*", help="only these objects or subjects")
+    parser.add_argument("--room-light", type=float, default=0.0,
+                        help="add the light of a room to every image: this share of the captures' "
+                             "99th percentile times the albedo (default 0: none)")
     return parser
 
 
@@ -130,7 +168,7 @@ def study_cases(args):
 
     logging.basicConfig(level=logging.ERROR, format="%(name)s: %(message)s")
     torch.set_num_threads(args.threads)
-    return cases(args.only, args.sets, args.data, args.cache, args.names)
+    return cases(args.only, args.sets, args.data, args.cache, args.names, room_light=args.room_light)
 
 
 def selfcal_study(description: str, folder: str, made_with: dict, run_case, summarise, progress,
@@ -344,12 +382,18 @@ def main():
                         help=f"the rendered objects' interreflections traced to this many bounces "
                              f"(default {scenes.BOUNCES}; 2: none, the direct light and its cast shadows "
                              f"alone; rendered on first use and cached apart)")
+    parser.add_argument("--room-light", type=float, default=0.0,
+                        help="add the light of a room to every image: this share of the captures' "
+                             "99th percentile times the albedo (default 0: none; with_room_light)")
     parser.add_argument("--list", action="store_true", help="print the objects as a Markdown table and stop")
     parser.add_argument("--verbose", action="store_true")
     args = parser.parse_args()
     if args.bounces < 2:
         parser.error(f"--bounces is the path tracer's longest path, at least 2 (direct light), "
                      f"got {args.bounces}")
+    if args.room_light < 0:
+        parser.error(f"--room-light is a share of the captures' 99th percentile, at least 0, got "
+                     f"{args.room_light}")
     if args.list:
         print(catalogue())
         return
@@ -369,18 +413,21 @@ def main():
                    "weights": weights_used(args.settings)}
         if args.bounces != scenes.BOUNCES:
             claimed["bounces"] = args.bounces
+        if args.room_light:
+            claimed["room_light"] = args.room_light
         runs.claim(out, claimed)
     except (ValueError, InputError) as e:
         parser.error(str(e))
     print(f"stages: network → {' → '.join(stage_names) or '(none)'}; settings: "
           f"{' '.join(args.settings) or 'defaults'}"
           + ("" if args.bounces == scenes.BOUNCES else f"; renders traced to {args.bounces} bounces")
+          + (f"; a room's light of {args.room_light:g} added" if args.room_light else "")
           + f"; results in {out}")
     print(f"{'group':<9} {'case':<12} {'set':>3} {'network':>8} "
           + " ".join(f"{s:>9}" for s in stage_names) + f" {'final':>8} {'int':>6} {'time':>6}  raised")
     results = {}
     for group, name, label, read in cases(args.only, args.sets, args.data, args.cache, args.names,
-                                          args.bounces):
+                                          args.bounces, args.room_light):
         path = out / f"{group}-{name}-{label}.json"
         result = json.loads(path.read_text()) if path.is_file() else None
         why = None if result is None else stale(result, made_with)

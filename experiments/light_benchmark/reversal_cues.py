@@ -36,7 +36,6 @@ both; the cues are what differs:
 
 from __future__ import annotations
 
-import argparse
 import logging
 import sys
 from pathlib import Path
@@ -53,7 +52,6 @@ from unps.solvers.rpca import robust_init
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import benchmark  # noqa: E402
-import scenes  # noqa: E402
 
 def contour_facing(normals: np.ndarray, mask: np.ndarray) -> float:
     """Mean outward component of (H, W, 3) unit ``normals`` on the occluding contour of ``mask``
@@ -100,18 +98,14 @@ def attached_cues(subject, lights, normals: np.ndarray) -> dict[str, float]:
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--data", type=Path, default=benchmark.DEFAULT_DATA)
-    parser.add_argument("--cache", type=Path, default=benchmark.DEFAULT_CACHE)
-    parser.add_argument("--only", nargs="+", choices=benchmark.GROUPS, default=list(benchmark.DEFAULT_GROUPS))
-    parser.add_argument("--sets", nargs="+", choices=list(scenes.LIGHT_SETS), default=list(scenes.LIGHT_SETS))
-    parser.add_argument("--names", nargs="*", help="only these objects or subjects")
+    parser = benchmark.case_parser(__doc__.split("\n")[0])
     args = parser.parse_args()
     logging.basicConfig(level=logging.ERROR)
     print(f"{'group':<9} {'case':<12} {'set':>3} {'network':>8} {'turned':>7} {'inside out':>10} "
           f"{'rlift':>6} {'clift':>6} {'contour':>8} {'level':>6} {'cur':>6} {'rev':>6} {'pairs':>6} "
           f"{'flat':>13} {'pixel':>13} {'pairs':>6} {'scale':>6} {'warns':>5}")
-    for group, name, label, read in benchmark.cases(args.only, args.sets, args.data, args.cache, args.names):
+    for group, name, label, read in benchmark.cases(args.only, args.sets, args.data, args.cache, args.names,
+                                                               room_light=args.room_light):
         subject = read()
         lights, _ = network_lights(subject, device="cpu")
         error = angular_error(lights.directions, subject.light_directions).mean()

@@ -58,7 +58,8 @@ class LightData(L.LightningDataModule):
         recipe, data = self.recipe, self.data
         meshes = (mesh_views(data.meshes_dir, recipe.resolution, data.views_per_mesh, self.seed)
                   if data.meshes_dir else None)
-        # shapes, layouts, paint, second_material, interreflection, narrowed_intensities, camera:
+        # shapes, layouts, paint, second_material, interreflection, narrowed_intensities, room_light,
+        # camera:
         # .get, as the configs of older runs lack them
         common = dict(resolution=recipe.resolution, images=recipe.images,
                       lights_per_shape=data.lights_per_shape, max_zenith_deg=data.max_zenith_deg,
@@ -69,6 +70,7 @@ class LightData(L.LightningDataModule):
                       paint=data.get("paint", 0.0), second_material=data.get("second_material", 0.0),
                       interreflection=data.get("interreflection", 0.0),
                       narrowed_intensities=data.get("narrowed_intensities", 0.0),
+                      room_light=data.get("room_light", 0.0),
                       camera=camera(data.get("camera")), device=self.device)
         done = self.start_step * recipe.batch_size
         remaining = max(recipe.max_steps * recipe.batch_size - done, recipe.batch_size)

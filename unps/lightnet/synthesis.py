@@ -37,6 +37,8 @@ DARKEST_SECOND = -2.0
 drawn down to a hundredth, so half of them are dark glossy ones, black in an 8-bit image but where
 their highlights fall, as the dark materials of real objects are."""
 
+ROOM_LIGHT_MAX = 0.04
+"""The brightest room light drawn (:func:`with_room_light`): about 2 % of a stack's 99th percentile."""
 LEVEL_SAMPLES = 8192
 """About this many of a stack's object values (evenly spaced) set its 99th percentile."""
 
@@ -61,6 +63,9 @@ class LightDataset(Dataset):
         interreflection: share of samples whose facets light each other
             (:func:`~unps.lightnet.interreflection.interreflected`): cavities and the foot of a
             wall filled with light bounced off the rest of the object, as in real captures.
+        room_light: share of samples that a room lights as well (:func:`with_room_light`), at a
+            level drawn from U(0, :data:`ROOM_LIGHT_MAX`): light that no dark frame took out, the
+            same in every image, as photographs outside a blacked-out rig hold.
         narrowed_intensities: share of samples whose lights' intensities spread less than
             ``intensity_range``: the range shrunk toward 1 by a factor drawn from U(0, 1), from
             every light equally bright to the whole range, as rigs of matched lamps give.
@@ -94,13 +99,14 @@ class LightDataset(Dataset):
                  camera: Camera | None = None, seed: int = 0, family: str | None = None,
                  shape: str | None = None, offset: int = 0, paint: float = 0.0,
                  second_material: float = 0.0, interreflection: float = 0.0,
-                 narrowed_intensities: float = 0.0, device: torch.device = torch.device("cpu")):
+                 narrowed_intensities: float = 0.0, room_light: float = 0.0,
+                 device: torch.device = torch.device("cpu")):
         if resolution % 32 or resolution < 32:
             raise InputError(f"resolution must be a multiple of 32, got {resolution}")
         if not 1 <= images <= lights_per_shape:
             raise InputError(f"images per sample must lie in 1…{lights_per_shape}, got {images}")
         shares = dict(paint=paint, second_material=second_material, interreflection=interreflection,
-                      narrowed_intensities=narrowed_intensities)
+                      narrowed_intensities=narrowed_intensities, room_light=room_light)
         for name, share in shares.items():
             if not 0 <= share <= 1:
                 raise InputError(f"{name} is a share of the samples, in 0…1; got {share}")
@@ -118,7 +124,7 @@ class LightDataset(Dataset):
         self.texture, self.paint, self.perturbation = texture, paint, perturbation
         self.second_material, self.interreflection = second_material, interreflection
         self.intensity_range, self.seed, self.family = intensity_range, seed, family
-        self.narrowed_intensities = narrowed_intensities
+        self.narrowed_intensities, self.room_light = narrowed_intensities, room_light
         self.offset, self.saturation, self.device = offset, saturation, torch.device(device)
 
     def __len__(self) -> int:
@@ -161,11 +167,12 @@ class LightDataset(Dataset):
             second = darkened(self.materials.draw(g)[1], 10 ** (DARKEST_SECOND * float(u(1))))
             coat = coated(self.resolution, g) * maps.mask
         bounces = self.interreflection > 0 and float(u(1)) < self.interreflection
+        room = ROOM_LIGHT_MAX * float(u(1)) if self.room_light > 0 and float(u(1)) < self.room_light else 0.0
         shape = (self.images, 3, self.resolution, self.resolution)
         if self.camera is not None:
             return Scene(maps, brdf, family, lights[pick], intensities, albedo, second, coat, bounces,
-                         exposure=expose(self.camera, shape, g, defer_noise=self.device.type != "cpu"))
-        return Scene(maps, brdf, family, lights[pick], intensities, albedo, second, coat, bounces,
+                         room, exposure=expose(self.camera, shape, g, defer_noise=self.device.type != "cpu"))
+        return Scene(maps, brdf, family, lights[pick], intensities, albedo, second, coat, bounces, room,
                      saturation=self.saturation,
                      perturbation=self.perturbation * (2 * torch.rand(shape, generator=g) - 1))
 
@@ -179,6 +186,7 @@ class Scene:
         intensities: (n,); albedo: (H, W) or (H, W, 3) multiplier, or None.
         second: a second material, or None; coat: (H, W) float, 1 where it lies (None with it).
         bounces: whether the object's facets light each other (interreflections).
+        room: the level of a room's light (:func:`with_room_light`; 0: none).
         exposure: the simulated camera's draws, or None for the paper's perturbation:
         saturation: the level the stack is clipped at (None: none), and
         perturbation: (n, 3, H, W) the noise added after.
@@ -193,6 +201,7 @@ class Scene:
     second: torch.nn.Module | None = None
     coat: torch.Tensor | None = None
     bounces: bool = False
+    room: float = 0.0
     exposure: Exposure | None = None
     saturation: float | None = None
     perturbation: torch.Tensor | None = None
@@ -219,6 +228,8 @@ def render(scene: Scene, device: torch.device) -> dict[str, torch.Tensor]:
     if scene.bounces:
         reflectance = reflectance_map(scene).to(device)
         images = interreflected(images, maps.normals, maps.depth, maps.mask, reflectance)
+    if scene.room:
+        images = with_room_light(images, intensities, torch.tensor(scene.room, device=device))
     values = images[:, :, maps.mask].flatten()
     level = torch.quantile(values[:: max(1, len(values) // LEVEL_SAMPLES)], 0.99).clamp_min(1e-8)
     images = images / level
@@ -256,6 +267,7 @@ class SceneBatch:
             of the batch has one.
         bounces: (B,) bool, the samples with interreflections; reflectance: (B, H, W, 3) their
             pixels' diffuse reflectance (:func:`reflectance_map`), None when no sample bounces.
+        room: (B,) each sample's room light (:func:`with_room_light`; 0: none).
         exposures: the camera's draws, packed (or None); saturation, perturbation: (B, n, 3, H, W)
             the paper's noise otherwise.
     """
@@ -277,6 +289,7 @@ class SceneBatch:
     second_pixels: torch.Tensor | None
     bounces: torch.Tensor
     reflectance: torch.Tensor | None
+    room: torch.Tensor
     exposures: Exposures | None
     saturation: float | None
     perturbation: torch.Tensor | None
@@ -315,6 +328,7 @@ class SceneBatch:
                    {i: brdf for i, brdf in enumerate(seconds)
                     if brdf is not None and not isinstance(brdf, AnalyticBRDF)},
                    coat, lobe_pixels(mask & (coat > 0), seconds) if two else None, bounces, reflectance,
+                   torch.tensor([scene.room for scene in scenes], dtype=torch.float32),
                    Exposures.of([scene.exposure for scene in scenes]) if camera else None,
                    scenes[0].saturation,
                    None if camera else torch.stack([scene.perturbation for scene in scenes]))
@@ -343,6 +357,7 @@ def render_batch(batch: SceneBatch, device: torch.device) -> dict[str, torch.Ten
         depth, reflectance = to(batch.shadows.depth), to(batch.reflectance)
         images = torch.stack([interreflected(images[b], normals[b], depth[b], mask[b], reflectance[b])
                               if bounce else images[b] for b, bounce in enumerate(batch.bounces.tolist())])
+    images = with_room_light(images, intensities, to(batch.room))
     images = images / stack_levels(images, to(batch.level_index), to(batch.level_valid))
     if batch.exposures is not None:
         images = record_batch(images, batch.exposures)
@@ -354,6 +369,18 @@ def render_batch(batch: SceneBatch, device: torch.device) -> dict[str, torch.Ten
     return {"images": images * mask[:, None], "mask": mask.float(), "directions": to(batch.lights.float()),
             "intensities": to(batch.intensities.float()),
             "family": to(batch.family)}
+
+
+def with_room_light(images: torch.Tensor, intensities: torch.Tensor, level: torch.Tensor) -> torch.Tensor:
+    """``images`` with a room's light added: the same in every image, ``level`` × the mean over
+    the stack of each image divided by its light's intensity — the object under a surround as
+    bright as its lamps on average, shaded and shadowed as they shade it.
+
+    Args:
+        images: (..., n, 3, H, W) radiance; intensities: (..., n); level: (...) ≥ 0.
+    """
+    surround = (images / intensities[..., None, None, None]).mean(-4, keepdim=True)
+    return images + level[..., None, None, None, None] * surround
 
 
 def map_tensors(item, function):
