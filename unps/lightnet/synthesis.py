@@ -357,7 +357,8 @@ def render_batch(batch: SceneBatch, device: torch.device) -> dict[str, torch.Ten
         depth, reflectance = to(batch.shadows.depth), to(batch.reflectance)
         images = torch.stack([interreflected(images[b], normals[b], depth[b], mask[b], reflectance[b])
                               if bounce else images[b] for b, bounce in enumerate(batch.bounces.tolist())])
-    images = with_room_light(images, intensities, to(batch.room))
+    if bool(batch.room.any()):                 # on the CPU: no wait on the device
+        images = with_room_light(images, intensities, to(batch.room))
     images = images / stack_levels(images, to(batch.level_index), to(batch.level_valid))
     if batch.exposures is not None:
         images = record_batch(images, batch.exposures)
