@@ -1310,6 +1310,16 @@ def test_a_rooms_light_is_the_same_in_every_captured_image_and_scales_with_the_a
     np.testing.assert_allclose(read().images, lit.images)
 
 
+def test_light_benchmark_refuses_a_negative_room_light_by_name(tmp_path, capsys, monkeypatch):
+    benchmark = load_script("lb_benchmark", "experiments/light_benchmark/benchmark.py")
+    monkeypatch.setattr(sys, "argv", ["benchmark.py", "--room-light", "-0.01", "--out", str(tmp_path / "out")])
+    with pytest.raises(SystemExit) as stop:
+        benchmark.main()
+    assert stop.value.code == 2
+    assert "--room-light is a share of the captures' 99th percentile, at least 0, got -0.01" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
 def test_lamps_study_evens_out_each_lamps_brightness_and_colour_from_its_true_intensity():
     """``lamps alike``: each image divided by its light's RGB intensity — the images a rig of
     equal white lamps would give; ``lamps white``: times that intensity's mean, brightness kept."""
