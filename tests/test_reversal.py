@@ -83,6 +83,19 @@ def test_a_reading_is_not_turned_for_predicting_fewer_shadows():
     assert not ReversalTest().favours_reversal(dark_anyway)
 
 
+def test_few_shadow_pairs_turn_the_lights_only_when_enough_of_them_are_dark():
+    """A pot shard read inside out under 20 lights and a room's light (light benchmark,
+    2026-12-05): its reversed reading's own shadows are 26 pairs, 18 of them dark where 0.1 would
+    be dark anyway; the current reading casts none. That is positive evidence, few pairs or not.
+    A handful of dark pairs is not: the contrast's pseudo-counts ask for 15 or more."""
+    shard = ShadowEvidence(lit_pairs=9000, dark_pairs=40, current_pairs=0, current_dark=0,
+                           current_expected=0.0, reversed_pairs=26, reversed_dark=18,
+                           reversed_expected=0.1)
+    assert ReversalTest().favours_reversal(shard), shard.describe()
+    handful = dataclasses.replace(shard, reversed_pairs=12, reversed_dark=12)
+    assert not ReversalTest().favours_reversal(handful), handful.describe()
+
+
 @pytest.mark.slow
 def test_a_glossy_goblet_on_a_thin_stem_rendered_by_unps_keeps_the_networks_lights():
     from unps.lightnet.estimate import network_lights
