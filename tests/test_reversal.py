@@ -167,6 +167,17 @@ def test_a_dome_in_a_lit_room_is_never_turned_by_the_light_in_its_attached_shado
     assert "subtract a dark frame" in caplog.text
 
 
+def test_the_attached_shadow_warning_holds_over_few_pairs_but_not_a_handful():
+    """The light benchmark's pot shard under 96 lights, inside out, with a room's light (0.01):
+    24 pairs in attached shadow at 10 % of the 99th percentile, 98 % of it the reversed
+    reading's interreflections at a scale of 1.26, none the current one's. The rose under 12
+    lights had 7 pairs: too few to say anything."""
+    shard = AttachedLight(pairs=24, level=0.10, current_share=0.0, reversed_share=0.98,
+                          reversed_scale=1.26)
+    assert shard.points_to_reversal
+    assert not dataclasses.replace(shard, pairs=7).points_to_reversal
+
+
 def test_the_dark_dome_has_too_little_light_in_its_attached_shadows_to_read():
     dome = interreflected(concave=False)
     right = Lights(dome.light_directions, None, "estimated")

@@ -185,7 +185,7 @@ class AttachedLight:
     reversed_share: float
     reversed_scale: float
 
-    MIN_PAIRS: ClassVar[int] = 40
+    MIN_PAIRS: ClassVar[int] = 20
     MIN_LEVEL: ClassVar[float] = 0.03
     MIN_SHARE: ClassVar[float] = 0.6
     MAX_CURRENT_SHARE: ClassVar[float] = 0.3
@@ -199,7 +199,10 @@ class AttachedLight:
         ``MAX_CURRENT_SHARE`` by the current one. On the light benchmark
         (``experiments/light_benchmark/reversal_cues.py``, 89 readings) it held on 7 of the 8
         readings inside out (not the rose under 12 lights: 7 pairs) and on none read the right
-        way round; a flat light of the room's on a convex object can hold it too."""
+        way round; a flat light of the room's on a convex object can hold it too. A room's light
+        also takes pairs away (the pot shard under 96 lights: 46 → 35 → 24 with 0.005 and 0.01 of
+        it), hence a floor of 20: with it as with 40, none of those 89 readings read the right way
+        round holds it without room light or at 0.005."""
         low, high = self.SCALES
         return (self.pairs >= self.MIN_PAIRS and self.level >= self.MIN_LEVEL
                 and self.reversed_share >= self.MIN_SHARE
