@@ -1275,13 +1275,18 @@ def test_light_benchmark_renders_without_interreflections_when_traced_to_two_bou
     assert [obj.bounces for obj in made] == [2, 2]
 
 
-def test_light_benchmark_refuses_fewer_than_two_bounces_by_name(tmp_path, capsys, monkeypatch):
+@pytest.mark.parametrize("option, value, message", [
+    ("--bounces", "1", "--bounces is the path tracer's longest path, at least 2 (direct light), got 1"),
+    ("--room-light", "-0.01", "--room-light is a share of the captures' 99th percentile, at least 0, got -0.01"),
+])
+def test_light_benchmark_refuses_a_bad_option_by_name_writing_nothing(option, value, message, tmp_path, capsys,
+                                                                       monkeypatch):
     benchmark = load_script("lb_benchmark", "experiments/light_benchmark/benchmark.py")
-    monkeypatch.setattr(sys, "argv", ["benchmark.py", "--bounces", "1", "--out", str(tmp_path / "out")])
+    monkeypatch.setattr(sys, "argv", ["benchmark.py", option, value, "--out", str(tmp_path / "out")])
     with pytest.raises(SystemExit) as stop:
         benchmark.main()
     assert stop.value.code == 2
-    assert "--bounces is the path tracer's longest path, at least 2 (direct light), got 1" in capsys.readouterr().err
+    assert message in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
 
 
@@ -1308,16 +1313,6 @@ def test_a_rooms_light_is_the_same_in_every_captured_image_and_scales_with_the_a
     monkeypatch.setattr(benchmark, "_cases", lambda *args: iter([("diligent", "sphere", "12", lambda: subject)]))
     (_, _, _, read), = benchmark.cases(["diligent"], ["12"], tmp_path, tmp_path, room_light=0.02)
     np.testing.assert_allclose(read().images, lit.images)
-
-
-def test_light_benchmark_refuses_a_negative_room_light_by_name(tmp_path, capsys, monkeypatch):
-    benchmark = load_script("lb_benchmark", "experiments/light_benchmark/benchmark.py")
-    monkeypatch.setattr(sys, "argv", ["benchmark.py", "--room-light", "-0.01", "--out", str(tmp_path / "out")])
-    with pytest.raises(SystemExit) as stop:
-        benchmark.main()
-    assert stop.value.code == 2
-    assert "--room-light is a share of the captures' 99th percentile, at least 0, got -0.01" in capsys.readouterr().err
-    assert not (tmp_path / "out").exists()
 
 
 def test_lamps_study_evens_out_each_lamps_brightness_and_colour_from_its_true_intensity():
