@@ -1473,3 +1473,32 @@ def test_diffuse_maxima_undo_a_bas_relief_of_a_lambertian_spheres_lights():
     for plane in (False, True):
         undone = wrong @ np.linalg.inv(study.pinned_bas_relief(found, wrong[images], plane))
         assert angular_error(undone, lights).mean() < 1.0
+
+
+def test_highlights_undo_a_bas_relief_of_a_glossy_spheres_lights():
+    study = load_script("lb_highlights_bas_relief", "experiments/light_benchmark/highlights_bas_relief.py")
+    from argparse import Namespace
+
+    from test_highlights import VIEW, cap, unit
+    from unps.metrics import angular_error
+
+    size = 96
+    rows, cols = np.mgrid[:size, :size]
+    x, y = (cols - 47.5) / 45, (47.5 - rows) / 45
+    inside = x ** 2 + y ** 2 < 0.8
+    normals = np.stack([x, y, np.sqrt(np.clip(1 - x ** 2 - y ** 2, 0, 1))], -1)[inside]
+    lights = cap(96, 50.0)
+    lit = np.clip(normals @ lights.T, 0, None).T                                  # (n, m)
+    gray = 0.1 * lit + (np.clip(normals @ unit(lights + VIEW).T, 0, None).T ** 400) * (lit > 0)
+    p = study.bas_relief(0.15, -0.1, 1.2)
+    turned = lights @ np.linalg.inv(p)                  # the lights under a bas-relief, and their
+    wrong, brightness = unit(turned), np.linalg.norm(turned, axis=1)   # intensities to match
+    assert angular_error(wrong, lights).mean() > 4.0
+    args = Namespace(away=25.0, min_images=8, max_misfit=0.15)
+    pixels, scaled, _, peaks = study.highlight_cues(gray, wrong, brightness, args)
+    assert len(pixels) >= 50
+    undone = wrong @ np.linalg.inv(study.pinned_bas_relief(scaled, wrong[peaks]))
+    assert angular_error(undone, lights).mean() < 1.0
+    # under the true lights the premise holds: each highlight's diffuse normal is its half vector
+    pixels, scaled, halves, _ = study.highlight_cues(gray, lights, np.ones(96), args)
+    assert np.median(angular_error(scaled, halves)) < 2.5   # the half vector: a quarter of the spacing
