@@ -1451,15 +1451,20 @@ def test_error_sources_sorts_pixels_into_outline_black_dark_shadowed_and_plain()
     assert (names[far] == "plain").all()               # the plane far from it
 
 
+def sphere_seen_from_above(reach: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """A (96, 96) mask of a sphere's pixels within ``reach`` of its centre (1: the whole
+    outline) and their (m, 3) unit normals."""
+    rows, cols = np.mgrid[:96, :96]
+    x, y = (cols - 47.5) / 45, (47.5 - rows) / 45
+    mask = x ** 2 + y ** 2 < reach ** 2
+    return mask, np.stack([x, y, np.sqrt(np.clip(1 - x ** 2 - y ** 2, 0, 1))], -1)[mask]
+
+
 def test_diffuse_maxima_undo_a_bas_relief_of_a_lambertian_spheres_lights():
     study = load_script("lb_diffuse_maxima", "experiments/light_benchmark/diffuse_maxima.py")
     from unps.metrics import angular_error
 
-    size = 96
-    rows, cols = np.mgrid[:size, :size]
-    x, y = (cols - 47.5) / 45, (47.5 - rows) / 45
-    mask = x ** 2 + y ** 2 < 1
-    normals = np.stack([x, y, np.sqrt(np.clip(1 - x ** 2 - y ** 2, 0, 1))], -1)[mask]
+    mask, normals = sphere_seen_from_above()
     lights = np.random.default_rng(0).normal(size=(40, 3))
     lights[:, 2] = np.abs(lights[:, 2]) + 1.0
     lights /= np.linalg.norm(lights, axis=1, keepdims=True)
@@ -1482,11 +1487,7 @@ def test_highlights_undo_a_bas_relief_of_a_glossy_spheres_lights():
     from test_highlights import VIEW, cap, unit
     from unps.metrics import angular_error
 
-    size = 96
-    rows, cols = np.mgrid[:size, :size]
-    x, y = (cols - 47.5) / 45, (47.5 - rows) / 45
-    inside = x ** 2 + y ** 2 < 0.8
-    normals = np.stack([x, y, np.sqrt(np.clip(1 - x ** 2 - y ** 2, 0, 1))], -1)[inside]
+    _, normals = sphere_seen_from_above(reach=0.9)
     lights = cap(96, 50.0)
     lit = np.clip(normals @ lights.T, 0, None).T                                  # (n, m)
     gray = 0.1 * lit + (np.clip(normals @ unit(lights + VIEW).T, 0, None).T ** 400) * (lit > 0)
