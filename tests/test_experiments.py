@@ -1482,8 +1482,6 @@ def test_diffuse_maxima_undo_a_bas_relief_of_a_lambertian_spheres_lights():
 
 def test_highlights_undo_a_bas_relief_of_a_glossy_spheres_lights():
     study = load_script("lb_highlights_bas_relief", "experiments/light_benchmark/highlights_bas_relief.py")
-    from argparse import Namespace
-
     from test_highlights import VIEW, cap, unit
     from unps.metrics import angular_error
 
@@ -1495,11 +1493,11 @@ def test_highlights_undo_a_bas_relief_of_a_glossy_spheres_lights():
     turned = lights @ np.linalg.inv(p)                  # the lights under a bas-relief, and their
     wrong, brightness = unit(turned), np.linalg.norm(turned, axis=1)   # intensities to match
     assert angular_error(wrong, lights).mean() > 4.0
-    args = Namespace(away=25.0, min_images=8, max_misfit=0.15)
-    pixels, scaled, _, peaks = study.highlight_cues(gray, wrong, brightness, args)
+    diffuse = dict(away_deg=25.0, min_images=8, max_misfit=0.15)
+    pixels, scaled, _, peaks = study.highlight_cues(gray, wrong, brightness, **diffuse)
     assert len(pixels) >= 50
     undone = wrong @ np.linalg.inv(study.pinned_bas_relief(scaled, wrong[peaks]))
     assert angular_error(undone, lights).mean() < 1.0
     # under the true lights the premise holds: each highlight's diffuse normal is its half vector
-    pixels, scaled, halves, _ = study.highlight_cues(gray, lights, np.ones(96), args)
+    pixels, scaled, halves, _ = study.highlight_cues(gray, lights, np.ones(96), **diffuse)
     assert np.median(angular_error(scaled, halves)) < 2.5   # the half vector: a quarter of the spacing

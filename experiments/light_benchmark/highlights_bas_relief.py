@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize
 
+from unps.inverse.fit import unit
 from unps.inverse.highlights import LIT_SHARE, VIEW, highlight_normals
 from unps.metrics import angular_error
 
@@ -41,11 +42,6 @@ from albedo_entropy import bas_relief  # noqa: E402
 from benchmark import case_parser, cases, light_source  # noqa: E402
 
 CAP_DEG = 15.0          # an angle between a diffuse normal and its half vector counts at most this
-
-
-def unit(v: np.ndarray) -> np.ndarray:
-    """``v`` (…, 3) scaled to unit length along its last axis."""
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
 def diffuse_normals(shading: np.ndarray, lights: np.ndarray, peaks: np.ndarray, away_deg: float,
@@ -92,17 +88,19 @@ def pinned_bas_relief(normals: np.ndarray, lights: np.ndarray) -> np.ndarray:
     return bas_relief(x[0], x[1], np.exp(x[2]))
 
 
-def highlight_cues(gray: np.ndarray, directions: np.ndarray, intensities: np.ndarray, args
+def highlight_cues(gray: np.ndarray, directions: np.ndarray, intensities: np.ndarray, away_deg: float,
+                   min_images: int, max_misfit: float
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """For (n, m) ``gray`` images under lights of (n, 3) ``directions`` and (n,) ``intensities``:
-    the (k,) highlight pixels that have a diffuse normal, their (k, 3) scaled diffuse normals,
-    (k, 3) half vectors and (k,) peak images."""
+    the (k,) highlight pixels that have a diffuse normal (:func:`diffuse_normals`, with
+    ``away_deg``, ``min_images`` and ``max_misfit``), their (k, 3) scaled diffuse normals, (k, 3)
+    half vectors and (k,) peak images."""
     shading = gray / intensities[:, None]
     halves, peaked = highlight_normals(shading, directions)
     pixels = np.flatnonzero(peaked)
     peaks = shading[:, pixels].argmax(0)
-    normals, found = diffuse_normals(shading[:, pixels], directions, peaks, args.away,
-                                     args.min_images, args.max_misfit)
+    normals, found = diffuse_normals(shading[:, pixels], directions, peaks, away_deg, min_images,
+                                     max_misfit)
     return pixels[found], normals[found], halves[pixels[found]], peaks[found]
 
 
@@ -122,6 +120,7 @@ def main() -> None:
     network, _ = light_source([], [])
     print(f"{'case':<28} {'network':>8} {'turned':>8} {'pixels':>7}   under the true lights: "
           f"{'pixels':>6} {'diffuse-half':>12} {'half-true':>9} {'diffuse-true':>12}")
+    diffuse = (args.away, args.min_images, args.max_misfit)
     rows = []
     for group, name, label, read in cases(args.only, args.sets, args.data, args.cache, args.names):
         subject = read()
@@ -130,15 +129,16 @@ def main() -> None:
         truth = subject.light_directions
         true_intensities = (subject.light_intensities.mean(1) if subject.light_intensities is not None
                             else np.ones(len(truth)))
-        true_pixels, true_normals, true_halves, _ = highlight_cues(gray, truth, true_intensities, args)
+        true_pixels, true_diffuse, true_halves, _ = highlight_cues(gray, truth, true_intensities, *diffuse)
         premise = [np.nan] * 3
         if len(true_pixels):
-            premise[0] = float(np.median(angular_error(true_normals, true_halves)))
+            premise[0] = float(np.median(angular_error(true_diffuse, true_halves)))
             if subject.normals is not None:
-                normals = subject.normals[subject.mask][true_pixels]
-                premise[1] = float(np.median(angular_error(true_halves, normals)))
-                premise[2] = float(np.median(angular_error(true_normals, normals)))
-        pixels, normals, _, peaks = highlight_cues(gray, lights.directions, lights.intensities.mean(1), args)
+                true_normals = subject.normals[subject.mask][true_pixels]
+                premise[1] = float(np.median(angular_error(true_halves, true_normals)))
+                premise[2] = float(np.median(angular_error(true_diffuse, true_normals)))
+        pixels, normals, _, peaks = highlight_cues(gray, lights.directions, lights.intensities.mean(1),
+                                                   *diffuse)
         before = float(angular_error(lights.directions, truth).mean())
         after = before
         if len(pixels) >= args.min_pixels:
