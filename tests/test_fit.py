@@ -12,7 +12,7 @@ from unps.errors import InputError
 from unps.fit import fit
 
 OUTPUTS = {"metrics.json", "normals.npy", "normals.png", "albedo.npy", "albedo.png", "depth.npy",
-           "mesh.ply", "error.png", "lights.txt", "lights.png", "tensorboard"}
+           "mesh.ply", "shape.png", "error.png", "lights.txt", "lights.png", "tensorboard"}
 
 
 def config(tmp_path, *overrides):

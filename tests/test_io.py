@@ -15,6 +15,7 @@ from unps.grid import block_mean
 from unps.inverse.grids import MOSTLY_ZERO, black_headroom
 from unps.io.files import atomic_path
 from unps.io.images import read_image, read_mask, srgb_to_linear
+from unps.io.pictures import centred_height, shape_figure_png
 
 
 def test_16_bit_png_is_read_at_full_depth(tmp_path):
@@ -320,3 +321,28 @@ def test_the_checks_read_image_by_image_what_the_whole_stack_says():
         np.testing.assert_allclose(black_headroom(stack, mask, factor, 0.5 / 255, intensities),
                                    share * 0.5 / 255 / intensities[:, None, None], rtol=1e-6)
     assert black_headroom(stack + 1 / 255, mask, 3, 0.5 / 255, None) is None
+
+
+def sphere_cap(size: int = 60) -> tuple[np.ndarray, np.ndarray]:
+    """(H, W) heights toward the camera of a sphere's cap, and its (H, W) disc mask."""
+    r, c = (np.mgrid[0:size, 0:size] - (size - 1) / 2) / (0.45 * size)
+    mask = r ** 2 + c ** 2 < 1
+    return np.where(mask, np.sqrt(np.clip(1 - r ** 2 - c ** 2, 0, None)) * 0.45 * size, np.nan), mask
+
+
+@pytest.mark.parametrize("sign", [1, -1])
+def test_the_shape_pictures_profiles_bulge_for_a_dome_and_sag_for_a_bowl(sign):
+    depth, mask = sphere_cap()
+    height, (top, left) = centred_height(sign * depth, mask)
+    middle_row = height[height.shape[0] // 2]
+    ends, middle = middle_row[[0, -1]], middle_row[len(middle_row) // 2]
+    assert np.all(sign * (middle - ends) > 20)
+    assert np.nanmean(height[mask[top:top + height.shape[0], left:left + height.shape[1]]]) == pytest.approx(0, abs=1e-9)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 20), (20, 1), (30, 40)])
+def test_the_shape_picture_is_drawn_for_any_mask_even_a_line_of_pixels(shape):
+    mask = np.pad(np.ones(shape, bool), 3)
+    picture = cv2.imdecode(np.frombuffer(shape_figure_png(np.where(mask, 1.0, np.nan), mask, "line"),
+                                         np.uint8), cv2.IMREAD_COLOR)
+    assert picture is not None and picture.shape[1] > picture.shape[0] > 100

@@ -146,6 +146,77 @@ def lights_figure_png(directions: np.ndarray, intensities: np.ndarray | None, ti
     return buffer.getvalue()
 
 
+def centred_height(depth: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, tuple[int, int]]:
+    """The (h, w) float64 height over the mask's bounding box, less its mean over the mask, NaN
+    off the mask (at least 2 × 2: a line of pixels is padded with NaN), and the box's (top, left)
+    corner in the (H, W) ``depth`` and ``mask``.
+
+    Example:
+        >>> mask = np.zeros((4, 5), bool); mask[1, 1:4] = True
+        >>> height, corner = centred_height(np.arange(20.0).reshape(4, 5), mask)
+        >>> height.shape, corner, height[0].tolist()
+        ((2, 3), (1, 1), [-1.0, 0.0, 1.0])
+    """
+    rows, cols = np.nonzero(mask)
+    top, bottom, left, right = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
+    height = np.where(mask, depth, np.nan)[top:bottom, left:right].astype(np.float64)
+    height = np.pad(height - np.nanmean(height), [(0, max(0, 2 - n)) for n in height.shape],
+                    constant_values=np.nan)
+    return height, (int(top), int(left))
+
+
+def shape_figure_png(depth: np.ndarray, mask: np.ndarray, title: str, max_side: int = 56) -> bytes:
+    """A PNG of the recovered surface, so that a dome is told from a bowl at a glance: the depth
+    seen from above and to the side, shaded by one fixed light, and its profiles along the
+    object's middle row and middle column (height toward the camera against position).
+
+    Args:
+        depth: (H, W) height toward the camera in pixel units (+z, the unps frame), NaN or
+            anything off the mask.
+        mask: (H, W) bool, the object.
+        title: the figure's title.
+        max_side: the 3D view's grid is thinned to at most this many samples a side (the
+            profiles keep every pixel).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    height, (top, left) = centred_height(depth, mask)
+    stride = max(1, int(np.ceil(max(height.shape) / max_side)))
+    thin = height[::stride, ::stride]
+    y, x = np.mgrid[0:thin.shape[0], 0:thin.shape[1]] * stride
+    fig = plt.figure(figsize=(11, 4.6), dpi=110)
+    view = fig.add_subplot(1, 2, 1, projection="3d")
+    gy, gx = np.gradient(np.nan_to_num(thin), stride)
+    light = np.array([-0.4, 0.5, 0.77])                  # from the upper left, toward the camera
+    shade = (-gx * light[0] + gy * light[1] + light[2]) / np.sqrt(1 + gx ** 2 + gy ** 2)
+    colours = plt.get_cmap("gray")(np.clip(0.15 + 0.85 * shade, 0, 1))
+    view.plot_surface(x, -y, thin, facecolors=colours, rstride=1, cstride=1, linewidth=0,
+                      antialiased=False, shade=False)
+    span = np.nanmax(thin) - np.nanmin(thin) if np.isfinite(thin).any() else 0.0
+    view.set_box_aspect((thin.shape[1], thin.shape[0], max(span / stride, 1.0)))
+    view.view_init(elev=30, azim=-60)
+    view.set(xlabel="x (pixels)", ylabel="y (pixels)")
+    view.set_title("seen from above and to the side", fontsize=9)
+    profiles = fig.add_subplot(1, 2, 2)
+    fig.subplots_adjust(wspace=0.3)
+    middle_row, middle_col = height.shape[0] // 2, height.shape[1] // 2
+    profiles.plot(np.arange(height.shape[1]), height[middle_row], label=f"row {top + middle_row} (left → right)")
+    profiles.plot(np.arange(height.shape[0]), height[:, middle_col],
+                  label=f"column {left + middle_col} (top → bottom)")
+    profiles.set(xlabel="position along the line (pixels)", ylabel="height toward the camera (pixels)")
+    profiles.set_title("profiles through the middle: a dome bulges up, a bowl sags", fontsize=9)
+    profiles.grid(alpha=0.3)
+    profiles.legend(fontsize=7)
+    fig.suptitle(title, fontsize=10)
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", bbox_inches="tight")
+    plt.close(fig)
+    return buffer.getvalue()
+
+
 def labelled_rows(rows: list[np.ndarray], labels: list[str]) -> np.ndarray:
     """Stack (h, w, 3) uint8 picture rows under one another with each row's label written in a
     dark strip on its left → (Σh, w + strip, 3) uint8.

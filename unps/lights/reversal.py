@@ -402,7 +402,7 @@ class ReversalTest:
             log.warning("the estimated lights may read the surface inside out (concave for convex): "
                         "the light in its attached shadows reads as the interreflections of the "
                         "reversed reading (%s), though no cast shadow shows it, so the lights stay. "
-                        "If the normal map shows the object bulging where it is hollow, rerun with "
+                        "If shape.png shows the object bulging where it is hollow, rerun with "
                         "light.reversal.force=true; if the room's light reached it, subtract a dark "
                         "frame from the images", attached.describe())
             reason += ": as the reversed reading's interreflections, but not turned on that alone"

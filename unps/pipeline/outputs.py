@@ -14,7 +14,7 @@ from unps.io.files import atomic_path, write_json, write_npy
 from unps.io.images import write_png8
 from unps.io.mesh import write_ply
 from unps.io.pictures import (albedo_rgb, error_figure_png, error_rgb, labelled_rows,
-                              lights_figure_png, normal_rgb, to_display)
+                              lights_figure_png, normal_rgb, shape_figure_png, to_display)
 from unps.lights import Lights, write_lights
 
 log = logging.getLogger(__name__)
@@ -26,7 +26,9 @@ def write_fit_outputs(out: Path, subject: Subject, estimate: Estimate, depth: np
     """Write the mask used, normals, albedo, depth, mesh, error map, lights, TensorBoard and
     metrics.json.
 
-    ``lights.png`` shows the lights used, against the true ones when those are known.
+    ``lights.png`` shows the lights used, against the true ones when those are known;
+    ``shape.png`` the recovered surface from above and to the side, and its profiles (a dome is
+    told from a bowl there at a glance: lights read inside out give the one for the other).
     With ground truth, ``normals_gt.png`` and ``error.npy`` (float16 degrees) are written too,
     and ``lights_gt.txt`` when the lights used were not the true ones: the report's
     qualitative grids and light plots read them.
@@ -51,6 +53,8 @@ def write_fit_outputs(out: Path, subject: Subject, estimate: Estimate, depth: np
     write_npy(out / "depth.npy", depth)
     vertices, faces = depth_to_mesh(depth, mask, subject.frame)
     write_ply(out / "mesh.ply", vertices, faces, normals=estimate.normals[mask])
+    with atomic_path(out / "shape.png") as tmp:
+        tmp.write_bytes(shape_figure_png(depth, mask, f"{subject.name}: the recovered surface"))
     write_lights(out / "lights.txt", lights)
     if true_lights is not None:
         write_lights(out / "lights_gt.txt", true_lights)
