@@ -203,7 +203,8 @@ def shape_figure_png(depth: np.ndarray, mask: np.ndarray, title: str, max_side: 
     profiles = fig.add_subplot(1, 2, 2)
     fig.subplots_adjust(wspace=0.3)
     middle_row, middle_col = height.shape[0] // 2, height.shape[1] // 2
-    profiles.plot(np.arange(height.shape[1]), height[middle_row], label=f"row {top + middle_row} (left → right)")
+    profiles.plot(np.arange(height.shape[1]), height[middle_row],
+                  label=f"row {top + middle_row} (left → right)")
     profiles.plot(np.arange(height.shape[0]), height[:, middle_col],
                   label=f"column {left + middle_col} (top → bottom)")
     profiles.set(xlabel="position along the line (pixels)", ylabel="height toward the camera (pixels)")
