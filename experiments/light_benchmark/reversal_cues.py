@@ -27,7 +27,9 @@ both; the cues are what differs:
   where the prediction follows where the light is) and ``pixel`` (the share explained of what
   changes from image to image at a pixel, each pixel's mean over its attached images taken
   out: ambient light does not change with the light; over the ``pairs`` of the pixels
-  attached in two images or more), and ``scale``, the reversed reading's
+  attached in two images or more), ``change`` (the share of the observed light's Σ value² in
+  those pairs that is such change at all, whichever reading predicts it: near 0 where the light
+  in attached shadows is the same in every image, as a room's is), and ``scale``, the reversed reading's
   free scale (about the brightest material's albedo, at most 1, where the prediction is
   interreflection).
 
@@ -79,6 +81,19 @@ def within_pixel(values: np.ndarray, attached: np.ndarray) -> np.ndarray:
     return (values - mean[None])[attached & (count >= 2)[None]]
 
 
+def changed_share(seen: np.ndarray, changes: np.ndarray) -> float:
+    """Σ ``changes``² over Σ ``seen``² for the (k,) values seen in attached shadows and the
+    (j,) changes of :func:`within_pixel`; nan without changes.
+
+    Example:
+        >>> round(changed_share(np.array([1.0, 1.0, 2.0, 0.0]), np.array([1.0, -1.0])), 3)
+        0.333
+    """
+    if changes.size == 0:
+        return float("nan")
+    return float((changes ** 2).sum() / max((seen ** 2).sum(), 1e-12))
+
+
 def attached_cues(subject, lights, normals: np.ndarray) -> dict[str, float]:
     """The light seen in attached shadows and how each reading's one-bounce prediction explains
     it (:func:`unps.lights.reversal.attached_predictions`; keys as the columns, see the module)."""
@@ -89,7 +104,8 @@ def attached_cues(subject, lights, normals: np.ndarray) -> dict[str, float]:
     cues = {"level": summary.level if seen.size else float("nan"), "pairs": summary.pairs,
             "cur": summary.current_share, "rev": summary.reversed_share,
             "rev scale": summary.reversed_scale, "pixel pairs": int(changes.size),
-            "warns": summary.points_to_reversal}
+            "warns": summary.points_to_reversal,
+            "change": changed_share(seen, changes)}
     for reading, key in (("current", "cur"), ("reversed", "rev")):
         cues[f"{key} flat"] = over_flat(seen, maps[reading][attached])
         cues[f"{key} pixel"] = (explained_share(changes, within_pixel(maps[reading], attached))[0]
@@ -103,7 +119,7 @@ def main():
     logging.basicConfig(level=logging.ERROR)
     print(f"{'group':<9} {'case':<12} {'set':>3} {'network':>8} {'turned':>7} {'inside out':>10} "
           f"{'rlift':>6} {'clift':>6} {'contour':>8} {'level':>6} {'cur':>6} {'rev':>6} {'pairs':>6} "
-          f"{'flat':>13} {'pixel':>13} {'pairs':>6} {'scale':>6} {'warns':>5}")
+          f"{'flat':>13} {'pixel':>13} {'pairs':>6} {'change':>6} {'scale':>6} {'warns':>5}")
     for group, name, label, read in benchmark.cases(args.only, args.sets, args.data, args.cache, args.names,
                                                                room_light=args.room_light):
         subject = read()
@@ -118,7 +134,8 @@ def main():
               f"{evidence.current_lift:>6.1f} {contour_facing(normals, subject.mask):>+8.2f} "
               f"{cue['level']:>6.3f} {cue['cur']:>+6.2f} {cue['rev']:>+6.2f} {cue['pairs']:>6} "
               f"{cue['cur flat']:>+6.2f} {cue['rev flat']:>+6.2f} {cue['cur pixel']:>+6.2f} "
-              f"{cue['rev pixel']:>+6.2f} {cue['pixel pairs']:>6} {cue['rev scale']:>6.2f} "
+              f"{cue['rev pixel']:>+6.2f} {cue['pixel pairs']:>6} {cue['change']:>6.3f} "
+              f"{cue['rev scale']:>6.2f} "
               f"{'yes' if cue['warns'] else '':>5}", flush=True)
 
 
