@@ -1,15 +1,19 @@
 """Self-calibration of lights (unps.lights.selfcal, unps.lights.model, unps.lights.factorization)."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
 from conftest import rendered
+from unps.data.lights import Verdict
 from unps.data.subject import Subject
 from unps.errors import InputError
 from unps.lights import Lights, light_errors
 from unps.lights.factorization import normals_under
+from unps.lights.reversal import HALF_TURN
 from unps.lights.model import MIN_EXPONENT, DepthPyramid, SelfCalibrationModel, SpecularLobes, normals_from_depth
 from unps.lights.selfcal import SelfCalibration, self_calibrate
 from unps.metrics import angular_error
@@ -445,3 +449,36 @@ def test_the_self_calibration_corrects_each_lights_colour_and_leaves_the_directi
     moved = {name: angular_error(lights.directions, sphere.light_directions).mean()
              for name, lights in (("found", found), ("plain", plain))}
     assert moved["found"] < moved["plain"], moved
+
+
+def warned(lights: Lights) -> Lights:
+    """``lights`` as the reversal test leaves them when it warns that they may read the surface
+    inside out."""
+    verdict = Verdict("reversal", "kept", "warned", {"attached_points_to_reversal": 1.0})
+    return dataclasses.replace(lights, verdicts=(verdict,))
+
+
+def test_a_bowl_read_inside_out_under_a_warning_is_turned_by_the_fit_of_its_half_turn(caplog):
+    """The two readings render the same shading; only the bowl's own depth throws the shadows
+    seen in its images, so the fit of the half turn ends lower and is kept."""
+    bowl = rendered(concave=True)
+    inside_out = warned(Lights((bowl.light_directions @ HALF_TURN).astype(np.float32), None, "estimated"))
+    fitted, verdict = SelfCalibration(steps=300, max_pixels=800)(bowl, inside_out)
+    assert verdict.outcome == "changed" and verdict.reason.startswith("turned the lights half a turn")
+    assert verdict.evidence["half_turn_loss"] < 0.99 * verdict.evidence["as_read_loss"]
+    assert angular_error(fitted.directions, bowl.light_directions).mean() < 5
+    assert "turn_inside_out=false" in caplog.text
+
+
+def test_a_dome_read_the_right_way_round_under_a_warning_keeps_its_lights():
+    """A warning on a convex object (a room's light in its attached shadows): the half turn's
+    depth throws shadows the images do not have, its fit ends higher, and the lights stay."""
+    dome = rendered(concave=False)
+    right = warned(Lights(dome.light_directions, None, "estimated"))
+    kept, verdict = SelfCalibration(steps=300, max_pixels=800)(dome, right)
+    assert verdict.outcome == "declined" and "decline_inside_out" in verdict.reason
+    assert verdict.evidence["half_turn_loss"] > verdict.evidence["as_read_loss"]
+    assert kept is right
+    fitted, verdict = SelfCalibration(steps=300, max_pixels=800, decline_inside_out=False)(dome, right)
+    assert verdict.outcome == "changed" and "half turned" in verdict.reason
+    assert angular_error(fitted.directions, dome.light_directions).mean() < 3

@@ -77,15 +77,16 @@ def trace_fit(images, start, settings, truth: np.ndarray) -> dict:
 def trace_case(subject, network, settings) -> dict:
     """The network's and the start's (after the reversal test) direction errors, the held fit's
     trace (:func:`trace_fit`), and the pulled fit's where the held one flattened the lights by more
-    than ``settings.max_flattening_deg`` at some read (else None); no fit where the default makes
-    none (``inside_out``: the reversal test warned, :func:`unps.lights.selfcal.warned_inside_out`)."""
+    than ``settings.max_flattening_deg`` at some read (else None); no fit where the reversal test
+    warned (``inside_out``, :func:`unps.lights.selfcal.warned_inside_out`): the default fits those
+    both ways (:func:`unps.lights.selfcal.both_readings`), which this study does not trace."""
     start = network(subject)
     truth = subject.light_directions.astype(np.float64)
     limit = settings.max_flattening_deg
     case = {"network": start.verdicts[0].errors["light_dir_mae"],
             "start": float(angular_error(start.directions.astype(np.float64), truth).mean()),
             "max_flattening_deg": limit, "inside_out": False, "held": None, "pulled": None}
-    if settings.decline_inside_out and warned_inside_out(start):
+    if (settings.turn_inside_out or settings.decline_inside_out) and warned_inside_out(start):
         return {**case, "inside_out": True}
     images = working_images(subject, start, settings)
     held = trace_fit(images, start, replace(settings, hold_frame=True, prior_weight=0.0), truth)

@@ -21,8 +21,13 @@ enough for a CPU:
    was sure of it (:mod:`unps.lights.prior`, :func:`frame_held_then_pulled`). A fit that
    diverges is declined, and so is one that leaves the lights nearer the view axis than the
    first guess (:func:`flattening`); where both are declined the first guess is returned. One
-   that moved the lights far from it warns. Where the reversal test warned that the first guess
-   may read the surface inside out, no fit is made (:func:`warned_inside_out`).
+   that moved the lights far from it warns;
+4. where the reversal test warned that the first guess may read the surface inside out
+   (:func:`warned_inside_out`), the frame-held fit is made from the first guess and from its half
+   turn about the view, and the reading whose fit explains the images better is kept
+   (:func:`both_readings`): the two render the same shading and highlights, and differ in the
+   cast shadows their depths throw. Where the first guess's fit is the better, it is not kept
+   either (``decline_inside_out``): the first guess is returned.
 
 Frame: x right (+col), y up (−row), z toward the camera; orthographic view along +z.
 """
@@ -48,6 +53,7 @@ from unps.lights import Lights, with_lights
 from unps.lights.factorization import normals_under
 from unps.lights.model import SelfCalibrationModel
 from unps.lights.prior import NetworkPrior, network_prior
+from unps.lights.reversal import half_turned
 from unps.metrics import angular_error, light_slant_bias
 
 log = logging.getLogger(__name__)
@@ -56,6 +62,7 @@ MIN_IMAGES = 4
 START_ALBEDO = 0.6   # the images are scaled to a 99th percentile of 1
 MOVED_WARNING = 5.0  # degrees, mean over the lights: the images and the network disagree
 CHECK_EVERY = 100    # steps between reads of the loss (on a GPU each read waits for the device)
+TURN_MARGIN = 0.01   # the half turn's fit must end this share below the fit as read to be kept
 
 
 @dataclass(frozen=True)
@@ -132,10 +139,18 @@ class SelfCalibration:
             by 1.02–1.48° gained on 10 cases of 11 (a turn about the view axis counts toward
             it); 1° until 2026-12-03 (``experiments/light_benchmark/README.md``, "Lights the fit
             flattens").
-        decline_inside_out: keep the first guess, without fitting, when the reversal test kept
-            the lights but warned that they may read the surface inside out
-            (:attr:`unps.lights.reversal.AttachedLight.points_to_reversal`): a fit of a surface
-            read inside out moves the lights to render it (unps's Rose 60.0° → 67.9° off).
+        turn_inside_out: where the reversal test kept the lights but warned that they may read
+            the surface inside out (:attr:`unps.lights.reversal.AttachedLight.points_to_reversal`),
+            fit them as read and half turned about the view, and keep the half turn where its
+            fit explains the images better (:func:`both_readings`). On the light benchmark
+            (``experiments/light_benchmark/README.md``, "Both readings fitted") it turned every
+            warned reading of the rose (unps's Rose 60.0° → 7.1°, the rose under 20 lights
+            54.1° → 13.3°), left the pot shard under 96 lights (whose two fits end level), and
+            would have turned none of the readings the right way round.
+        decline_inside_out: keep the first guess where the reversal test warned and the fit of
+            the lights as read is not worse than the half turn's (or, with ``turn_inside_out``
+            off, without fitting): a fit of a surface read inside out moves the lights to render
+            it (unps's Rose 60.0° → 67.9° off).
         log_every: steps between progress lines.
         device: where the fit runs (the run's ``device=``, :func:`unps.device.resolve_device`).
     """
@@ -159,6 +174,7 @@ class SelfCalibration:
     prior_floor_deg: float = 3.0
     prior_intensity: float = 0.1
     max_flattening_deg: float | None = 1.5
+    turn_inside_out: bool = True
     decline_inside_out: bool = True
     log_every: int = 500
     device: str = "auto"
@@ -202,17 +218,17 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
         raise InputError(f"self-calibration needs at least {MIN_IMAGES} images, "
                          f"{subject.name!r} has {subject.n_images}: use light=estimated (the "
                          f"network's lights) or light=gt")
-    if settings.decline_inside_out and warned_inside_out(lights):
+    warned = warned_inside_out(lights)
+    if warned and settings.turn_inside_out:
+        fitted, verdict = both_readings(subject, lights, settings, observe)
+    elif warned and settings.decline_inside_out:
         log.warning("self-calibration of %s skipped: the reversal test warned that the lights may "
                     "read the surface inside out, and a fit of that surface would move the lights "
                     "to render it; keeping them", subject.name)
         return lights, Verdict(settings.name, "declined", "the reversal test warned that the lights "
                                "may read the surface inside out (light.selfcal.decline_inside_out)")
-    images = working_images(subject, lights, settings)
-    if settings.frame_held_first:
-        fitted, verdict = frame_held_then_pulled(images, lights, settings, observe)
     else:
-        fitted, verdict = fit_once(images, lights, settings, observe)
+        fitted, verdict = fit_as_set(working_images(subject, lights, settings), lights, settings, observe)
     if verdict.outcome == "declined":
         log.warning("self-calibration of %s declined: %s; keeping the lights it started from",
                     subject.name, verdict.reason)
@@ -312,13 +328,76 @@ def fit_once(images: WorkingImages, lights: Lights, settings: SelfCalibration,
                            f"on average", evidence)
 
 
+def fit_as_set(images: WorkingImages, lights: Lights, settings: SelfCalibration,
+               observe: Callable[[int, np.ndarray], None] | None = None,
+               held: tuple[Lights, Verdict] | None = None) -> tuple[Lights, Verdict]:
+    """The fit ``settings`` describe from ``lights``: :func:`frame_held_then_pulled` with
+    ``frame_held_first`` (its first fit ``held`` where already made), else :func:`fit_once`."""
+    if settings.frame_held_first:
+        return frame_held_then_pulled(images, lights, settings, observe, held)
+    return fit_once(images, lights, settings, observe)
+
+
+def frame_held(settings: SelfCalibration) -> SelfCalibration:
+    """``settings`` for the fit with the lights' shared frame held and no pull."""
+    return replace(settings, hold_frame=True, prior_weight=0.0)
+
+
+def both_readings(subject: Subject, lights: Lights, settings: SelfCalibration,
+                  observe: Callable[[int, np.ndarray], None] | None = None) -> tuple[Lights, Verdict]:
+    """Where the reversal test warned that ``lights`` may read the surface inside out: the
+    frame-held fit from ``lights`` and from their half turn about the view (the same shading and
+    highlights, the reverse depth and its cast shadows); the half turn, fitted on as ``settings``
+    say, where its fit ends more than :data:`TURN_MARGIN` below the other's loss. Otherwise, with
+    ``settings.decline_inside_out``, ``lights`` themselves with a declined verdict; without, the
+    fit as read.
+
+    Returns:
+        The lights and the verdict, whose evidence holds both fits' losses
+        (``as_read_loss``, ``half_turn_loss``; inf where a fit diverged).
+    """
+    readings = {"as read": lights, "half turn": half_turned(lights)}
+    images = {name: working_images(subject, start, settings) for name, start in readings.items()}
+    held = {name: fit_once(images[name], start, frame_held(settings), observe)
+            for name, start in readings.items()}
+    loss = {name: float(verdict.evidence.get("loss", np.inf)) for name, (_, verdict) in held.items()}
+    loss = {name: value if np.isfinite(value) else np.inf for name, value in loss.items()}
+    compared = {"as_read_loss": loss["as read"], "half_turn_loss": loss["half turn"]}
+    both = (f"fitted as read and half turned about the view, the lights explain the images to a "
+            f"loss of {loss['as read']:.4g} and {loss['half turn']:.4g}")
+    if loss["half turn"] < (1 - TURN_MARGIN) * loss["as read"]:
+        log.warning("self-calibration of %s: the reversal test warned that the lights may read the "
+                    "surface inside out, and %s: turned them half a turn about the view axis; if "
+                    "shape.png shows the object hollow where it bulges, rerun with "
+                    "light.selfcal.turn_inside_out=false", subject.name, both)
+        fitted, verdict = fit_as_set(images["half turn"], readings["half turn"], settings, observe,
+                                     held["half turn"] if settings.frame_held_first else None)
+        then = "the fit of the half turn was declined" if verdict.outcome == "declined" else "then"
+        return fitted, replace(verdict, outcome="changed",
+                               reason=f"turned the lights half a turn about the view: {both}; "
+                                      f"{then}: {verdict.reason}",
+                               evidence={**verdict.evidence, **compared})
+    if settings.decline_inside_out:
+        log.warning("self-calibration of %s declined: the reversal test warned that the lights may "
+                    "read the surface inside out, and %s, not clearly better half turned; a fit of "
+                    "a surface that may be inside out would move the lights to render it, so they "
+                    "are kept", subject.name, both)
+        return lights, Verdict(settings.name, "declined", f"the reversal test warned that the lights "
+                               f"may read the surface inside out and {both}, not clearly better half "
+                               f"turned (light.selfcal.decline_inside_out)", compared)
+    fitted, verdict = fit_as_set(images["as read"], lights, settings, observe,
+                                 held["as read"] if settings.frame_held_first else None)
+    return fitted, replace(verdict, reason=f"{verdict.reason} ({both})",
+                           evidence={**verdict.evidence, **compared})
+
+
 def frame_held_then_pulled(images: WorkingImages, lights: Lights, settings: SelfCalibration,
-                           observe: Callable[[int, np.ndarray], None] | None = None
-                           ) -> tuple[Lights, Verdict]:
-    """``settings.frame_held_first``: the fit with the shared frame held and no pull, kept unless
-    declined; where declined, the fit the other settings describe, its verdict saying why."""
-    held = replace(settings, hold_frame=True, prior_weight=0.0)
-    fitted, verdict = fit_once(images, lights, held, observe)
+                           observe: Callable[[int, np.ndarray], None] | None = None,
+                           held: tuple[Lights, Verdict] | None = None) -> tuple[Lights, Verdict]:
+    """``settings.frame_held_first``: the fit with the shared frame held and no pull (``held``
+    where already made), kept unless declined; where declined, the fit the other settings
+    describe, its verdict saying why."""
+    fitted, verdict = held if held is not None else fit_once(images, lights, frame_held(settings), observe)
     if verdict.outcome != "declined":
         return fitted, replace(verdict, reason=f"with the shared frame held: {verdict.reason}")
     log.info("the fit with the shared frame held was declined (%s); fitting pulled toward the "
