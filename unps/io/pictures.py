@@ -68,6 +68,16 @@ def error_rgb(error_deg: np.ndarray, mask: np.ndarray, vmax: float = ERROR_RANGE
     return (np.round(rgb) * mask[..., None]).astype(np.uint8)
 
 
+def png_bytes(fig) -> bytes:
+    """A matplotlib figure as PNG bytes, cropped to what it draws; the figure is closed."""
+    import matplotlib.pyplot as plt
+
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", bbox_inches="tight")
+    plt.close(fig)
+    return buffer.getvalue()
+
+
 def error_figure_png(error_deg: np.ndarray, mask: np.ndarray, title: str,
                      vmax: float = ERROR_RANGE_DEG) -> bytes:
     """A PNG of the error map with a labelled colour bar (‘≥ vmax’ at its top) and the title."""
@@ -85,10 +95,7 @@ def error_figure_png(error_deg: np.ndarray, mask: np.ndarray, title: str,
     ax.set_axis_off()
     bar = fig.colorbar(im, ax=ax, extend="max", fraction=0.046, pad=0.04)
     bar.set_label("angular error (°)")
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", bbox_inches="tight")
-    plt.close(fig)
-    return buffer.getvalue()
+    return png_bytes(fig)
 
 
 def lights_figure_png(directions: np.ndarray, intensities: np.ndarray | None, title: str,
@@ -140,10 +147,7 @@ def lights_figure_png(directions: np.ndarray, intensities: np.ndarray | None, ti
     bars.set_xlabel("image")
     bars.grid(alpha=0.3)
     fig.suptitle(title, fontsize=10)
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", bbox_inches="tight")
-    plt.close(fig)
-    return buffer.getvalue()
+    return png_bytes(fig)
 
 
 def centred_height(depth: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, tuple[int, int]]:
@@ -212,10 +216,7 @@ def shape_figure_png(depth: np.ndarray, mask: np.ndarray, title: str, max_side: 
     profiles.grid(alpha=0.3)
     profiles.legend(fontsize=7)
     fig.suptitle(title, fontsize=10)
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", bbox_inches="tight")
-    plt.close(fig)
-    return buffer.getvalue()
+    return png_bytes(fig)
 
 
 def labelled_rows(rows: list[np.ndarray], labels: list[str]) -> np.ndarray:
