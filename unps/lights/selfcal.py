@@ -232,7 +232,7 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
     if verdict.outcome == "declined":
         log.warning("self-calibration of %s declined: %s; keeping the lights it started from",
                     subject.name, verdict.reason)
-    elif verdict.evidence["moved_deg"] > MOVED_WARNING:
+    elif verdict.evidence.get("moved_deg", 0.0) > MOVED_WARNING:
         log.warning("self-calibration moved the lights %.1f° on average from the light network's "
                     "estimate: the images and the network disagree, and either may be wrong; check "
                     "lights.png, and calibrate the lights (light=gt) if you can",
@@ -354,28 +354,31 @@ def both_readings(subject: Subject, lights: Lights, settings: SelfCalibration,
 
     Returns:
         The lights and the verdict, whose evidence holds both fits' losses
-        (``as_read_loss``, ``half_turn_loss``; inf where a fit diverged).
+        (``as_read_loss``, ``half_turn_loss``; left out where a fit diverged). A half turn whose
+        fits are all declined is returned unfitted, the verdict ``changed`` all the same.
     """
     readings = {"as read": lights, "half turn": half_turned(lights)}
     images = {name: working_images(subject, start, settings) for name, start in readings.items()}
     held = {name: fit_once(images[name], start, frame_held(settings), observe)
             for name, start in readings.items()}
-    loss = {name: float(verdict.evidence.get("loss", np.inf)) for name, (_, verdict) in held.items()}
-    loss = {name: value if np.isfinite(value) else np.inf for name, value in loss.items()}
-    compared = {"as_read_loss": loss["as read"], "half_turn_loss": loss["half turn"]}
+    loss = {name: float(verdict.evidence.get("loss", np.nan)) for name, (_, verdict) in held.items()}
+    compared = {f"{name.replace(' ', '_')}_loss": value for name, value in loss.items() if np.isfinite(value)}
     both = (f"fitted as read and half turned about the view, the lights explain the images to a "
             f"loss of {loss['as read']:.4g} and {loss['half turn']:.4g}")
-    if loss["half turn"] < (1 - TURN_MARGIN) * loss["as read"]:
+    if np.isfinite(loss["as read"]) and loss["half turn"] < (1 - TURN_MARGIN) * loss["as read"]:
         log.warning("self-calibration of %s: the reversal test warned that the lights may read the "
                     "surface inside out, and %s: turned them half a turn about the view axis; if "
                     "shape.png shows the object hollow where it bulges, rerun with "
                     "light.selfcal.turn_inside_out=false", subject.name, both)
         fitted, verdict = fit_as_set(images["half turn"], readings["half turn"], settings, observe,
                                      held["half turn"] if settings.frame_held_first else None)
-        then = "the fit of the half turn was declined" if verdict.outcome == "declined" else "then"
-        return fitted, replace(verdict, outcome="changed",
-                               reason=f"turned the lights half a turn about the view: {both}; "
-                                      f"{then}: {verdict.reason}",
+        if verdict.outcome == "declined":        # the half turn itself, unfitted
+            return fitted, Verdict(settings.name, "changed", f"turned the lights half a turn about "
+                                   f"the view: {both}; the fit of the half turn was declined: "
+                                   f"{verdict.reason}", {**{f"half_turn_{k}": v for k, v in
+                                                            verdict.evidence.items()}, **compared})
+        return fitted, replace(verdict, reason=f"turned the lights half a turn about the view: {both}; "
+                                               f"then {verdict.reason}",
                                evidence={**verdict.evidence, **compared})
     if settings.decline_inside_out:
         log.warning("self-calibration of %s declined: the reversal test warned that the lights may "
