@@ -233,10 +233,11 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
         log.warning("self-calibration of %s declined: %s; keeping the lights it started from",
                     subject.name, verdict.reason)
     elif verdict.evidence.get("moved_deg", 0.0) > MOVED_WARNING:
-        log.warning("self-calibration moved the lights %.1f° on average from the light network's "
+        start = "the half turn of " if "half_turn_loss" in verdict.evidence else ""
+        log.warning("self-calibration moved the lights %.1f° on average from %sthe light network's "
                     "estimate: the images and the network disagree, and either may be wrong; check "
                     "lights.png, and calibrate the lights (light=gt) if you can",
-                    verdict.evidence["moved_deg"])
+                    verdict.evidence["moved_deg"], start)
     return fitted, verdict
 
 
