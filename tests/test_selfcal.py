@@ -482,3 +482,12 @@ def test_a_dome_read_the_right_way_round_under_a_warning_keeps_its_lights():
     fitted, verdict = SelfCalibration(steps=300, max_pixels=800, decline_inside_out=False)(dome, right)
     assert verdict.outcome == "changed" and "half turned" in verdict.reason
     assert angular_error(fitted.directions, dome.light_directions).mean() < 3
+
+
+@pytest.mark.parametrize("name, value", [("turn_inside_out", "ture"), ("decline_inside_out", 1),
+                                         ("frame_held_first", "no")])
+def test_a_switch_that_is_not_true_or_false_is_refused_by_name(name, value):
+    dome = rendered(concave=False)
+    with pytest.raises(InputError, match=rf"light.selfcal.{name} must be true or false, got {value!r}"):
+        self_calibrate(dome, Lights(dome.light_directions, None, "estimated"),
+                       SelfCalibration(**{name: value}))

@@ -63,6 +63,8 @@ START_ALBEDO = 0.6   # the images are scaled to a 99th percentile of 1
 MOVED_WARNING = 5.0  # degrees, mean over the lights: the images and the network disagree
 CHECK_EVERY = 100    # steps between reads of the loss (on a GPU each read waits for the device)
 TURN_MARGIN = 0.01   # the half turn's fit must end this share below the fit as read to be kept
+SWITCHES = ("skip_black", "censor_black", "hold_frame", "frame_held_first", "fit_colour",
+            "turn_inside_out", "decline_inside_out")   # the settings that are true or false
 
 
 @dataclass(frozen=True)
@@ -205,6 +207,9 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
         intensities times one fitted scale per image; geometric mean of the scales 1), or
         ``lights`` itself when the fit diverges; and the verdict.
     """
+    for name in SWITCHES:
+        if not isinstance(getattr(settings, name), bool):
+            raise InputError(f"light.selfcal.{name} must be true or false, got {getattr(settings, name)!r}")
     if not settings.settle_deg >= 0:
         raise InputError(f"light.selfcal.settle_deg must be a number of degrees >= 0 (0: run every "
                          f"step), got {settings.settle_deg}")
