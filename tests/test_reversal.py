@@ -14,6 +14,7 @@ from unps.lights.reversal import (HALF_TURN, AttachedLight, ReversalTest, Shadow
                                   shadow_evidence)
 from unps.lights.selfcal import SelfCalibration
 from unps.lights.stages import run_stages
+from unps.metrics import angular_error
 from unps.solvers.nayar import interreflection_kernel
 from unps.solvers.rpca import robust_init
 
@@ -200,17 +201,26 @@ def test_force_that_is_not_true_or_false_is_refused_by_name():
         ReversalTest(force="ture")
 
 
-def test_the_self_calibration_leaves_a_reading_the_reversal_test_warned_of(caplog):
-    """A surface read inside out is no surface to fit the lights to: after the reversal test's
-    warning the self-calibration keeps the lights without fitting; with
-    ``decline_inside_out=false`` it fits them."""
+def test_a_reading_warned_of_that_no_shadow_tells_apart_is_turned_by_the_self_calibration(caplog):
+    """The bowl's images hold no cast shadow, and the fit renders none (``shadows_every=0``): only
+    the light in its attached shadows, the reversed reading's interreflections, says how it is
+    read. The two readings' fits end level, and the tie goes to the warning: the half turn is
+    kept. With ``turn_inside_out`` off the lights are kept unfitted; with ``decline_inside_out``
+    off too, fitted as read."""
     bowl = interreflected(concave=True)
-    quick = dict(steps=100, max_pixels=600)
-    warned = run_stages(bowl, turned(bowl), [ReversalTest(), SelfCalibration(**quick)])
-    assert [v.outcome for v in warned.verdicts] == ["kept", "declined"]
-    assert np.array_equal(warned.directions, turned(bowl).directions)
-    assert "decline_inside_out" in warned.verdicts[-1].reason and "inside out" in caplog.text
-    fitted = run_stages(bowl, turned(bowl), [ReversalTest(), SelfCalibration(**quick, decline_inside_out=False)])
+    quick = dict(steps=100, max_pixels=600, shadows_every=0)
+    turned_back = run_stages(bowl, turned(bowl), [ReversalTest(), SelfCalibration(**quick)])
+    assert [v.outcome for v in turned_back.verdicts] == ["kept", "changed"]
+    evidence = turned_back.verdicts[-1].evidence
+    assert abs(evidence["half_turn_loss"] / evidence["as_read_loss"] - 1) < 0.05
+    assert angular_error(turned_back.directions, bowl.light_directions).mean() < 5
+    assert "turn_inside_out=false" in caplog.text
+    kept = run_stages(bowl, turned(bowl), [ReversalTest(), SelfCalibration(**quick, turn_inside_out=False)])
+    assert kept.verdicts[-1].outcome == "declined" and "decline_inside_out" in kept.verdicts[-1].reason
+    assert np.array_equal(kept.directions, turned(bowl).directions)
+    fitted = run_stages(bowl, turned(bowl), [ReversalTest(), SelfCalibration(
+        **quick, turn_inside_out=False, decline_inside_out=False)])
     assert fitted.verdicts[-1].outcome == "changed"
+    assert angular_error(fitted.directions, bowl.light_directions).mean() > 30
     right = Lights(bowl.light_directions, None, "estimated")
     assert run_stages(bowl, right, [ReversalTest(), SelfCalibration(**quick)]).verdicts[-1].outcome == "changed"

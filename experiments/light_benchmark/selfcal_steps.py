@@ -14,7 +14,8 @@ for ``--steps`` steps without stopping early, the lights' direction error and
 :func:`unps.lights.selfcal.flattening` read every 100 steps (``observe``): first the fit with the
 shared frame held; then, where it flattened the lights by more than
 ``light.selfcal.max_flattening_deg`` at any read, the pulled fit that would take over (neither
-where the reversal test warned that the reading may be inside out, as by default). One json per
+where the reversal test warned that the reading may be inside out or the network is unsure of it,
+as by default). One json per
 case in ``<cache>/results/selfcal_steps-<steps>/`` (a rerun resumes). A fit is deterministic and
 its steps do not depend on how many there will be (a constant learning rate, the shadows marched
 every 100 steps), so a read at step S is what ``light.selfcal.steps=S`` gives, and a stop rule can
@@ -45,7 +46,7 @@ from pathlib import Path
 import numpy as np
 from hydra.errors import ConfigCompositionException
 
-from unps.lights.selfcal import fit_once, flattening, warned_inside_out, working_images
+from unps.lights.selfcal import fit_once, flattening, unsure_reading, warned_inside_out, working_images
 from unps.metrics import angular_error
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -78,15 +79,18 @@ def trace_case(subject, network, settings) -> dict:
     """The network's and the start's (after the reversal test) direction errors, the held fit's
     trace (:func:`trace_fit`), and the pulled fit's where the held one flattened the lights by more
     than ``settings.max_flattening_deg`` at some read (else None); no fit where the reversal test
-    warned (``inside_out``, :func:`unps.lights.selfcal.warned_inside_out`): the default fits those
-    both ways (:func:`unps.lights.selfcal.both_readings`), which this study does not trace."""
+    warned, or the network is unsure of the reading (``inside_out``,
+    :func:`unps.lights.selfcal.warned_inside_out`, :func:`unps.lights.selfcal.unsure_reading`): the
+    default fits those both ways (:func:`unps.lights.selfcal.both_readings`), which this study does
+    not trace."""
     start = network(subject)
     truth = subject.light_directions.astype(np.float64)
     limit = settings.max_flattening_deg
     case = {"network": start.verdicts[0].errors["light_dir_mae"],
             "start": float(angular_error(start.directions.astype(np.float64), truth).mean()),
             "max_flattening_deg": limit, "inside_out": False, "held": None, "pulled": None}
-    if (settings.turn_inside_out or settings.decline_inside_out) and warned_inside_out(start):
+    if ((settings.turn_inside_out or settings.decline_inside_out) and warned_inside_out(start)
+            or settings.turn_inside_out and unsure_reading(start)):
         return {**case, "inside_out": True}
     images = working_images(subject, start, settings)
     held = trace_fit(images, start, replace(settings, hold_frame=True, prior_weight=0.0), truth)

@@ -9,7 +9,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from unps.data.lights import Verdict
+from unps.data.lights import UNSURE_SPREAD_DEG, Verdict
 from unps.data.subject import Subject
 from unps.device import resolve_device
 from unps.errors import InputError
@@ -25,9 +25,6 @@ FRAMINGS = (1.0, 0.9, 0.8, 0.7)
 shapes fill 0.4-1.0 of it, a capture cropped to its object all of it, and the network's answers
 at these four framings point different ways, so their mean beats most of them
 (``experiments/light_estimation/README.md``)."""
-SPREAD_WARNING = 10.0   # degrees; the default passes of the shipped weights stay under 8.7° (Rose)
-                        # on every subject measured (experiments/light_estimation/README.md),
-                        # flipped ones included
 
 
 def network_input(images: np.ndarray, mask: np.ndarray, resolution: int, fill: float = 1.0
@@ -80,7 +77,8 @@ def network_lights(subject: Subject, checkpoint: str | None = None, soft_decode:
         soft_decode: soft-arg-max decoding of the bins (else arg-max).
         symmetric: average the network's estimates under the eight symmetries of the square
             (:mod:`unps.lightnet.symmetry`; beyond the paper) and warn when they disagree by more
-            than :data:`SPREAD_WARNING` (median over the lights); False runs it once per framing.
+            than :data:`unps.data.lights.UNSURE_SPREAD_DEG` (median over the lights); False runs
+            it once per framing.
         framings: how much of the network's square input the object fills (:func:`network_input`;
             beyond the paper), taken in turn with the symmetries (:func:`paired`) and averaged:
             the network is not scale-invariant, and its estimates at nearby scales err apart.
@@ -149,12 +147,13 @@ def warn_if_uncertain(spread: np.ndarray) -> None:
     median = float(np.median(spread))
     log.info("the light network's passes (symmetries and framings of the image) disagree by %.1f° "
              "(median over the lights; %.1f° at most)", median, float(spread.max()))
-    if median > SPREAD_WARNING:
+    if median > UNSURE_SPREAD_DEG:
         log.warning("the estimated lights are uncertain: the light network's passes over the "
                     "symmetries and framings of the image disagree by %.1f° (median over the lights, "
                     "above %.0f°); "
-                    "expect light errors of tens of degrees — use light=gt if the lights are known, "
-                    "or check light=selfcal against a calibration shot", median, SPREAD_WARNING)
+                    "expect light errors of tens of degrees, often a surface read inside out (the "
+                    "self-calibration, light=selfcal, fits both readings) — use light=gt if the "
+                    "lights are known, and check shape.png", median, UNSURE_SPREAD_DEG)
 
 
 @torch.no_grad()
