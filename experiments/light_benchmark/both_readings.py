@@ -15,8 +15,9 @@ direction error), each fitted with the lights' shared frame held and no pull
 (:func:`unps.lights.selfcal.fit_once`, no limit on flattening; ``fitted``: where each ends), the
 end loss of each and the half turn's relative to the reading as read (``rel``: below 0 where the
 half turn explains the images better), the steps each fit took, and ``INSIDE-OUT`` where the half
-turn starts nearer the true lights. ``light.selfcal.turn_inside_out`` keeps the half turn where
-the reversal test warned and ``rel`` < −0.01 (:func:`unps.lights.selfcal.both_readings`).
+turn starts nearer the true lights. ``light.selfcal.turn_inside_out`` makes these two fits where
+the reversal test warned or the network is unsure, and keeps the reading
+:func:`unps.lights.selfcal.half_turn_kept` picks by ``rel`` (:func:`unps.lights.selfcal.both_readings`).
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ import torch
 
 from unps.lightnet.estimate import network_lights
 from unps.lights.reversal import half_turned
-from unps.lights.selfcal import SelfCalibration, fit_once, working_images
+from unps.lights.selfcal import SelfCalibration, fit_once, frame_held, working_images
 from unps.metrics import angular_error
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -42,8 +43,7 @@ def main():
     torch.set_num_threads(1)
     args = benchmark.case_parser(__doc__.split("\n")[0]).parse_args()
     logging.basicConfig(level=logging.ERROR)
-    held = replace(SelfCalibration(), hold_frame=True, prior_weight=0.0, max_flattening_deg=None,
-                   device="cpu")
+    held = frame_held(replace(SelfCalibration(), max_flattening_deg=None, device="cpu"))
     for group, name, label, read in benchmark.cases(args.only, args.sets, args.data, args.cache, args.names,
                                                     room_light=args.room_light):
         subject, began = read(), time.time()

@@ -46,7 +46,8 @@ from pathlib import Path
 import numpy as np
 from hydra.errors import ConfigCompositionException
 
-from unps.lights.selfcal import fit_once, flattening, unsure_reading, warned_inside_out, working_images
+from unps.lights.selfcal import (fit_once, flattening, frame_held, unsure_reading, warned_inside_out,
+                                 working_images)
 from unps.metrics import angular_error
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -93,7 +94,7 @@ def trace_case(subject, network, settings) -> dict:
             or settings.turn_inside_out and unsure_reading(start)):
         return {**case, "inside_out": True}
     images = working_images(subject, start, settings)
-    held = trace_fit(images, start, replace(settings, hold_frame=True, prior_weight=0.0), truth)
+    held = trace_fit(images, start, frame_held(settings), truth)
     flattened = limit is not None and max(f for _, _, f in held["trace"]) > limit
     return {**case, "held": held, "pulled": trace_fit(images, start, settings, truth) if flattened else None}
 

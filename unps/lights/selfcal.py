@@ -354,8 +354,8 @@ def frame_held(settings: SelfCalibration) -> SelfCalibration:
 
 
 def both_readings(subject: Subject, lights: Lights, settings: SelfCalibration,
-                  observe: Callable[[int, np.ndarray], None] | None = None,
-                  warned: bool = True) -> tuple[Lights, Verdict]:
+                  observe: Callable[[int, np.ndarray], None] | None, warned: bool
+                  ) -> tuple[Lights, Verdict]:
     """Where the reversal test ``warned`` that ``lights`` may read the surface inside out, or the
     light network is unsure of them: the frame-held fit from ``lights`` and from their half turn
     about the view (the same shading and highlights, the reverse depth and its cast shadows);
