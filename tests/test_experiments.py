@@ -1501,3 +1501,25 @@ def test_highlights_undo_a_bas_relief_of_a_glossy_spheres_lights():
     # under the true lights the premise holds: each highlight's diffuse normal is its half vector
     pixels, scaled, halves, _ = study.highlight_cues(gray, lights, np.ones(96), **diffuse)
     assert np.median(angular_error(scaled, halves)) < 2.5   # the half vector: a quarter of the spacing
+
+
+def test_bas_relief_study_finds_a_known_bas_relief_and_reads_a_bowls_interreflections_by_depth():
+    """The study's nearest bas-relief undoes one applied to the lights; on a bowl whose attached
+    shadows hold exactly its one-bounce light, every depth scale's prediction explains nearly all
+    of it (the pattern hardly tells the depth), while the scale it needs falls as the reading
+    deepens and is near the albedo's own (1) at the true depth."""
+    study = load_script("lb_bas_relief_left", "experiments/light_benchmark/bas_relief_left.py")
+    from test_reversal import interreflected
+    from unps.metrics import angular_error
+
+    bowl = interreflected(concave=True)
+    truth = bowl.light_directions.astype(np.float64)
+    wrong = study.turned(truth, study.bas_relief(0.1, -0.15, 1.3))
+    assert angular_error(wrong, truth).mean() > 4.0
+    mu, nu, log_lam = study.nearest_bas_relief(wrong, truth)
+    assert angular_error(study.turned(wrong, study.bas_relief(mu, nu, np.exp(log_lam))), truth).mean() < 0.05
+
+    rows = study.interreflection_reading(bowl, Lights(bowl.light_directions, None, "estimated"), (0.7, 1.0, 1.4))
+    assert all(r["pairs"] >= 500 and r["share"] > 0.95 for r in rows)
+    scales = [r["fit_scale"] for r in rows]
+    assert scales[0] > 1.5 > scales[1] > 0.9 > scales[2]
