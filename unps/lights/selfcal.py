@@ -318,9 +318,9 @@ def fit_once(images: WorkingImages, lights: Lights, settings: SelfCalibration,
     if weight is not None:
         evidence["black_share"] = float(1 - weight.mean())
     log.info("self-calibrated %d lights on %d pixels in %d steps (%.1f s): loss %.4g, pull toward "
-             "the first guess %.4g; directions moved %.2f° on average, %+.2f° nearer the view axis",
+             "the first guess %.4g; directions moved %.2f° on average, %.2f° %s the view axis",
              grid.n_images, int(grid.mask.sum()), steps, time.perf_counter() - start, loss, pull,
-             moved, flattened)
+             moved, abs(flattened), "nearer" if flattened >= 0 else "farther from")
     if settings.max_flattening_deg is not None and flattened > settings.max_flattening_deg:
         limit = f"light.selfcal.max_flattening_deg={settings.max_flattening_deg:g}°"
         return lights, Verdict(settings.name, "declined",
