@@ -1,7 +1,7 @@
 """How much of the final lights' error is the bas-relief, and do interreflections pin it?
 (Chandraker, Kahl & Kriegman, "Reflections on the generalized bas-relief ambiguity", CVPR 2005.)
 
-    python experiments/light_benchmark/bas_relief_left.py --only benchmark diligent synthetic   # ~70 min
+    python experiments/light_benchmark/bas_relief_left.py --only benchmark diligent synthetic   # ~45 min
     python experiments/light_benchmark/bas_relief_left.py --report                              # the tables
 
 Lambertian shading, attached and cast shadows are the same under lights S·P⁻¹ and scaled
@@ -16,8 +16,8 @@ Interreflections are not invariant: one bounce between facets depends on the dep
 robust initialisation and the lights are turned by P, and the light in attached shadows (where
 no direct light arrives, the same pairs for every P) is compared with the one-bounce prediction
 of that surface (:func:`unps.lights.reversal.one_bounce`'s kernel, the reversal test's reading):
-the share of it explained with one free scale, and that scale. Where the cue holds, the share
-peaks near the true λ. The case's true λ is the scale that brings the final lights nearest the
+the share of it explained with one free scale, and that scale. Were the cue to hold, the share
+would peak near the true λ. The case's true λ is the scale that brings the final lights nearest the
 truth. None of it feeds a stage.
 """
 
