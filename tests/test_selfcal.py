@@ -472,6 +472,7 @@ def test_a_bowl_read_inside_out_under_a_warning_or_unsure_is_turned_by_the_fit_o
     inside_out = why(Lights((bowl.light_directions @ HALF_TURN).astype(np.float32), None, "estimated"))
     fitted, verdict = SelfCalibration(steps=300, max_pixels=800)(bowl, inside_out)
     assert verdict.outcome == "changed" and verdict.reason.startswith("turned the lights half a turn")
+    assert verdict.evidence["half_turned"] == 1.0
     assert verdict.evidence["half_turn_loss"] < (1 - HALF_TURN_MARGIN) * verdict.evidence["as_read_loss"]
     assert angular_error(fitted.directions, bowl.light_directions).mean() < 5
     assert "turn_inside_out=false" in caplog.text
@@ -488,6 +489,7 @@ def test_a_dome_read_the_right_way_round_under_a_warning_or_unsure_is_fitted_as_
     right = why(Lights(dome.light_directions, None, "estimated"))
     fitted, verdict = SelfCalibration(steps=300, max_pixels=800)(dome, right)
     assert verdict.outcome == "changed" and verdict.reason.startswith("kept the lights as read")
+    assert verdict.evidence["half_turned"] == 0.0
     assert verdict.evidence["half_turn_loss"] > (1 + AS_READ_MARGIN) * verdict.evidence["as_read_loss"]
     assert angular_error(fitted.directions, dome.light_directions).mean() < 3
     kept, verdict = SelfCalibration(steps=300, max_pixels=800, turn_inside_out=False)(dome, right)

@@ -242,7 +242,7 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
         log.warning("self-calibration of %s declined: %s; keeping the lights it started from",
                     subject.name, verdict.reason)
     elif verdict.evidence.get("moved_deg", 0.0) > MOVED_WARNING:
-        start = "the half turn of " if verdict.reason.startswith("turned the lights half a turn") else ""
+        start = "the half turn of " if verdict.evidence.get("half_turned") else ""
         log.warning("self-calibration moved the lights %.1f° on average from %sthe light network's "
                     "estimate: the images and the network disagree, and either may be wrong; check "
                     "lights.png, and calibrate the lights (light=gt) if you can",
@@ -363,7 +363,8 @@ def both_readings(subject: Subject, lights: Lights, settings: SelfCalibration,
 
     Returns:
         The lights and the verdict, whose evidence holds both fits' losses
-        (``as_read_loss``, ``half_turn_loss``; left out where a fit diverged). A half turn whose
+        (``as_read_loss``, ``half_turn_loss``; left out where a fit diverged) and ``half_turned``
+        (1 where the half turn was kept, else 0). A half turn whose
         fits are all declined is returned unfitted, the verdict ``changed`` all the same.
     """
     why = ("the reversal test warned that the lights may read the surface inside out" if warned else
@@ -374,10 +375,12 @@ def both_readings(subject: Subject, lights: Lights, settings: SelfCalibration,
     held = {name: fit_once(images[name], start, frame_held(settings), observe)
             for name, start in readings.items()}
     loss = {name: float(verdict.evidence.get("loss", np.nan)) for name, (_, verdict) in held.items()}
+    turned = half_turn_kept(loss["as read"], loss["half turn"], warned)
     compared = {f"{name.replace(' ', '_')}_loss": value for name, value in loss.items() if np.isfinite(value)}
+    compared["half_turned"] = float(turned)
     both = (f"{why}; fitted as read and half turned about the view, the lights explain the images "
             f"to a loss of {loss['as read']:.4g} and {loss['half turn']:.4g}")
-    if half_turn_kept(loss["as read"], loss["half turn"], warned):
+    if turned:
         log.warning("self-calibration of %s: %s: turned them half a turn about the view axis; if "
                     "shape.png shows the object hollow where it bulges, rerun with "
                     "light.selfcal.turn_inside_out=false", subject.name, both)
