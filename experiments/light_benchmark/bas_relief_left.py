@@ -51,6 +51,16 @@ def turned(directions: np.ndarray, p: np.ndarray) -> np.ndarray:
     return out / np.linalg.norm(out, axis=1, keepdims=True)
 
 
+def turned_lights(lights, p: np.ndarray):
+    """``lights`` (:class:`unps.data.lights.Lights`) turned by the bas-relief P: scaled lights
+    s' = P⁻ᵀ s, so each intensity takes the length the turn gives its direction."""
+    scaled = lights.directions.astype(np.float64) @ np.linalg.inv(p)
+    length = np.linalg.norm(scaled, axis=1)
+    intensities = None if lights.intensities is None else (lights.intensities * length[:, None])
+    return dataclasses.replace(lights, directions=(scaled / length[:, None]).astype(np.float32),
+                               intensities=None if intensities is None else intensities.astype(np.float32))
+
+
 def nearest_bas_relief(directions: np.ndarray, truth: np.ndarray) -> np.ndarray:
     """(3,) μ, ν, log λ of the bas-relief that brings (n, 3) ``directions`` nearest (n, 3)
     ``truth`` (mean angle)."""
@@ -73,15 +83,10 @@ def interreflection_reading(subject, lights, scales) -> list[dict]:
     out = []
     for s in scales:
         p = bas_relief(0.0, 0.0, s)
-        scaled = lights.directions.astype(np.float64) @ np.linalg.inv(p)
-        length = np.linalg.norm(scaled, axis=1)
-        turned_lights = dataclasses.replace(
-            lights, directions=(scaled / length[:, None]).astype(np.float32),
-            intensities=None if lights.intensities is None else
-            (lights.intensities * length[:, None]).astype(np.float32))
         turned_normals = normals.astype(np.float64) @ p.T
         turned_normals /= np.maximum(np.linalg.norm(turned_normals, axis=-1, keepdims=True), 1e-12)
-        grid, maps, albedo = attached_facets(cropped, turned_lights, turned_normals.astype(np.float32))
+        grid, maps, albedo = attached_facets(cropped, turned_lights(lights, p),
+                                             turned_normals.astype(np.float32))
         attached = maps["attached"]
         seen = maps["observed"][attached]
         row = {"scale": s, "pairs": int(attached.sum()), "level": float(seen.mean()) if seen.size else 0.0}
