@@ -102,3 +102,21 @@ def test_the_development_objects_masks_are_found_to_within_a_few_percent():
     for name, least in (("pmsData/ballPNG", 0.97), ("pmsData_crop/catPNG", 0.96), ("pmsData_crop/pot1PNG", 0.96)):
         subject = read_diligent(diligent_object(name), quantization="auto")
         assert iou(auto_mask(subject.observed_images()).mask, subject.mask) > least, name
+
+
+def test_a_lit_table_that_joins_the_mask_at_the_images_edge_is_warned_of(tmp_path, caplog):
+    sphere = render_lambertian("sphere", size=48, n_lights=12, seed=2)
+    assert auto_mask(noisy(sphere.observed_images())).at_edge == 0
+    r, c = np.mgrid[0:48, 0:48]
+    table = (r >= 38) & ~sphere.mask                                  # under the sphere, to the edge
+    facing = np.array([0.0, 0.6, 0.8])                                # tilted toward the camera
+    lit = 0.7 * np.clip(sphere.light_directions @ facing, 0, None)
+    images = sphere.observed_images().copy()
+    images[:, table] = lit[:, None, None]
+    found = auto_mask(noisy(images))
+    assert found.mask[table].mean() > 0.5 and found.at_edge > 0
+    write_diligent(sphere.replace(images=noisy(images), light_intensities=None), tmp_path / "pot")
+    (tmp_path / "pot" / "mask.png").unlink()
+    with caplog.at_level(logging.WARNING):
+        read_folder(tmp_path / "pot")
+    assert f"the automatic mask reaches the image's edge on {found.at_edge} pixels" in caplog.text

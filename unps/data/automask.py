@@ -38,12 +38,16 @@ class AutoMask:
             thousands where the background stays dark, near 1 where it changes with the light as
             much as the object does (a lit table, a bright backdrop) and the mask is a guess.
         regions: connected regions above the threshold before the largest was kept.
+        at_edge: the mask's pixels on the image's edge: none where the whole object is in the
+            frame against its background; many where a lit surface beside it (a table under a
+            pot) joined it, or the object runs off the frame.
     """
 
     mask: np.ndarray
     threshold: float
     contrast: float
     regions: int
+    at_edge: int
 
 
 def otsu_threshold(values: np.ndarray, bins: int = 256) -> tuple[float, float]:
@@ -109,4 +113,15 @@ def auto_mask(images: np.ndarray) -> AutoMask:
     if not mask.any():
         mask = object_
     contrast = np.median(spread[mask]) / max(background, FLOOR)
-    return AutoMask(mask, float(np.exp(cut)), float(contrast), int(regions))
+    return AutoMask(mask, float(np.exp(cut)), float(contrast), int(regions), pixels_at_edge(mask))
+
+
+def pixels_at_edge(mask: np.ndarray) -> int:
+    """How many of an (H, W) mask's pixels lie on the image's edge (corners once).
+
+    >>> pixels_at_edge(np.pad(np.ones((2, 2), bool), 1)), pixels_at_edge(np.ones((3, 4), bool))
+    (0, 10)
+    """
+    edge = np.ones(mask.shape, bool)
+    edge[1:-1, 1:-1] = False
+    return int((mask & edge).sum())

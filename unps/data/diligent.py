@@ -181,4 +181,9 @@ def found_mask(subject: Subject, root: Path, asked: str) -> np.ndarray:
                     "light only %.1f× as much as what it calls the background (under %.0f×), so the "
                     "background may change with the light too; check mask.png in the run folder and "
                     "give a mask.png if it is wrong", root, found.contrast, CONTRAST_WARNING)
+    if found.at_edge:
+        log.warning("%s: the automatic mask reaches the image's edge on %d pixels: a lit surface beside "
+                    "the object (a table, a wall) may have joined it, or the object runs off the frame; "
+                    "check mask.png in the run folder and give a mask.png if it is wrong (the light "
+                    "network reads the object's outline)", root, found.at_edge)
     return found.mask
