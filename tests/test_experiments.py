@@ -1523,3 +1523,25 @@ def test_bas_relief_study_finds_a_known_bas_relief_and_reads_a_bowls_interreflec
     assert all(r["pairs"] >= 500 and r["share"] > 0.95 for r in rows)
     scales = [r["fit_scale"] for r in rows]
     assert scales[0] > 1.5 > scales[1] > 0.9 > scales[2]
+
+
+def test_mask_outline_study_reads_four_masks_and_the_networks_lights_under_each():
+    """The eroded and dilated masks differ from the true one by one pixel layer; the automatic
+    mask of an analytic sphere is within that layer of it; the network runs under each mask and
+    the row counts what the automatic mask misses and adds."""
+    study = load_script("lb_mask_outline", "experiments/light_benchmark/mask_outline.py")
+    from scipy import ndimage
+
+    sphere = render_lambertian(size=48, n_lights=12)
+    found = study.masks(sphere)
+    true = sphere.mask
+    ring = true & ~ndimage.binary_erosion(true, border_value=1)
+    assert np.array_equal(found["eroded"], true & ~ring)
+    assert (found["dilated"] >= true).all() and (found["dilated"] & ~true).sum() > 0
+    assert not (found["auto"] ^ true)[ndimage.binary_erosion(true, border_value=1)].any()   # the inside
+    network, _ = study.benchmark.light_source([], [])
+    result = study.run_case(sphere, network)
+    row = study.summarise(result)
+    assert all(0 <= row[f"net_{k}"] < 30 for k in study.NETWORK_MASKS) and np.isnan(row["final_true"])
+    assert result["missed"]["auto"] == int((true & ~found["auto"]).sum())
+    assert "auto mask off by" in study.report({("diligent", "sphere", "12"): row})
