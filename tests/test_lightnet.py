@@ -14,6 +14,7 @@ from unps.lightnet.brdf import (AnalyticBRDF, MERL_SHAPE, ggx_lobe, half_diff_an
                                 read_merl_binary, read_neural_brdf)
 from unps.lightnet.estimate import network_input, network_lights
 from unps.lightnet.network import LATE_STRIDES, LCNET_STRIDES, LightNet
+from unps.lightnet.outline import DIMMED_DOWN_TO, jittered_outlines, outline_rings
 from unps.lightnet.shapes import cast_shadows, maps_from_depth
 from unps.lightnet.synthesis import LightDataset
 from unps.lightnet.system import load_lightnet
@@ -534,3 +535,48 @@ def test_weights_saved_before_the_strides_were_named_load_with_the_late_strides(
     config = {"light": {"_target_": "unps.lightnet.network.LightNet", "width": 8, "head_width": 16}}
     net = build_net(config)
     assert [m.stride[0] for m in net.extractor.modules() if isinstance(m, torch.nn.Conv2d)] == list(LATE_STRIDES)
+
+
+# outlines as captures draw them (data.outline_jitter) ------------------------------------------
+
+def _disc_batch(b=6, n=3, size=24):
+    rows, cols = torch.meshgrid(torch.arange(size), torch.arange(size), indexing="ij")
+    mask = (((rows - 11.5) ** 2 + (cols - 11.5) ** 2) < 8 ** 2).float().expand(b, 1, size, size).clone()
+    images = (0.2 + torch.rand(b, n, 3, size, size, generator=torch.Generator().manual_seed(1))) * mask[:, None]
+    return images, mask
+
+
+def test_outline_jitter_moves_only_the_outline_and_dims_only_its_pixels():
+    images, mask = _disc_batch()
+    inner, outer = outline_rings(mask)
+    jittered, new_mask = jittered_outlines(images, mask, 1.0, torch.Generator().manual_seed(0))
+    changed = new_mask != mask
+    assert changed.any() and not (changed & ~(inner | outer)).any()     # a pixel layer, no deeper
+    for k in range(len(mask)):                                          # each sample erodes or dilates
+        assert not ((new_mask[k] < mask[k]).any() and (new_mask[k] > mask[k]).any())
+    new_inner, _ = outline_rings(new_mask)
+    ratio = jittered / images.clamp_min(1e-12)
+    on_outline = new_inner[:, None].expand_as(images)
+    kept_inside = (new_mask > 0.5)[:, None].expand_as(images) & ~on_outline
+    assert torch.equal(jittered[kept_inside], images[kept_inside])      # the inside is left alone
+    assert ratio[on_outline & (images > 0)].min() >= DIMMED_DOWN_TO - 1e-6
+    assert ratio[on_outline & (images > 0)].max() <= 1 + 1e-6
+    assert (jittered[(new_mask < 0.5)[:, None].expand_as(images)] == 0).all()   # off the object: black
+
+
+def test_outline_jitter_is_the_same_for_the_same_draws_and_none_at_share_zero():
+    images, mask = _disc_batch()
+    first = jittered_outlines(images, mask, 0.5, torch.Generator().manual_seed(1))
+    again = jittered_outlines(images, mask, 0.5, torch.Generator().manual_seed(1))
+    assert all(torch.equal(a, b) for a, b in zip(first, again))
+    untouched = jittered_outlines(images, mask, 0.0, torch.Generator().manual_seed(1))
+    assert untouched[0] is images and untouched[1] is mask
+    picked = (first[1] != mask).flatten(1).any(1)
+    assert 0 < int(picked.sum()) < len(mask)                            # about half the samples
+
+
+def test_training_with_outline_jitter_runs_and_a_share_outside_zero_to_one_is_refused(tmp_path):
+    metrics = train(train_config(tmp_path / "jitter", "recipe.max_steps=2", "data.outline_jitter=1.0"))
+    assert metrics["steps"] == 2
+    with pytest.raises(InputError, match=r"data.outline_jitter .* \[0, 1\]; got 1.5"):
+        train(train_config(tmp_path / "bad", "data.outline_jitter=1.5"))

@@ -120,6 +120,20 @@ def resumed_run(cfg: DictConfig, overrides: Sequence[str]) -> tuple[DictConfig, 
     return cfg, start_step
 
 
+def checked_share(value, name: str) -> float:
+    """A share in [0, 1] from the config.
+
+    Raises:
+        InputError: not a number in [0, 1]; the message names the option.
+
+    >>> checked_share(0.5, "data.outline_jitter")
+    0.5
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 1:
+        raise InputError(f"{name} is the share of samples it applies to, a number in [0, 1]; got {value!r}")
+    return float(value)
+
+
 def checked_precision(cfg: DictConfig) -> str:
     """``cfg.recipe.precision`` (float32 for runs saved before the option), once the seed and it
     are checked.
@@ -187,7 +201,10 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
     system = LightEstimation(net, lr=cfg.recipe.lr,
                              lr_milestones=tuple(cfg.recipe.lr_milestones),
                              lr_gamma=cfg.recipe.lr_gamma, soft_decode=cfg.soft_decode,
-                             config=OmegaConf.to_container(cfg, resolve=True))
+                             config=OmegaConf.to_container(cfg, resolve=True),
+                             outline_jitter=checked_share(cfg.data.get("outline_jitter", 0.0),
+                                                          "data.outline_jitter"),
+                             seed=cfg.seed)
     rate = SampleRate(skip=min(5, cfg.recipe.max_steps // 2))
     progress = ProgressLog(shown=PROGRESS, logger=log, after_validation=True)
     callbacks = [LightSamples(), LearningRateMonitor(), rate, progress]

@@ -15,6 +15,7 @@ from unps.errors import InputError
 from unps.lightnet.bins import decode_lights, encode_lights
 from unps.lightnet.materials import FAMILIES
 from unps.lightnet.network import LATE_STRIDES, LightNet
+from unps.lightnet.outline import jittered_outlines
 
 SHIPPED = Path(__file__).parent / "weights" / "lightnet.pt"
 
@@ -57,11 +58,13 @@ class LightEstimation(L.LightningModule):
     """
 
     def __init__(self, net: LightNet, lr: float = 5e-4, lr_milestones: tuple[int, ...] = (),
-                 lr_gamma: float = 0.3, soft_decode: bool = True, config: dict | None = None):
+                 lr_gamma: float = 0.3, soft_decode: bool = True, config: dict | None = None,
+                 outline_jitter: float = 0.0, seed: int = 0):
         super().__init__()
         self.net, self.lr, self.soft_decode = net, lr, soft_decode
         self.lr_milestones, self.lr_gamma = list(lr_milestones), lr_gamma
         self.config = config or {}
+        self.outline_jitter, self.seed = outline_jitter, seed
 
     def forward(self, images, mask):
         return self.net(images, mask)
@@ -91,6 +94,11 @@ class LightEstimation(L.LightningModule):
         return {"loss": loss, "directions": directions, "intensities": intensities}
 
     def training_step(self, batch, batch_index):
+        if self.outline_jitter > 0:
+            generator = torch.Generator(device=batch["mask"].device)
+            generator.manual_seed(self.seed * 1_000_003 + self.global_step)   # resumes as it ran
+            images, mask = jittered_outlines(batch["images"], batch["mask"], self.outline_jitter, generator)
+            batch = {**batch, "images": images, "mask": mask}
         return self._step(batch, "train")["loss"]
 
     def validation_step(self, batch, batch_index):
