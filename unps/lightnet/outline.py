@@ -41,7 +41,7 @@ def outline_rings(mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """
     on = mask > 0.5
     grown = F.max_pool2d(mask, 3, 1, 1) > 0.5
-    shrunk = -F.max_pool2d(-mask, 3, 1, 1, ceil_mode=False) > 0.5
+    shrunk = -F.max_pool2d(-mask, 3, 1, 1) > 0.5
     edge = torch.ones_like(mask, dtype=torch.bool)
     edge[..., 1:-1, 1:-1] = False
     return on & ~(shrunk & ~edge), grown & ~on

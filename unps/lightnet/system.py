@@ -55,6 +55,10 @@ class LightEstimation(L.LightningModule):
         lr_milestones: steps after which the learning rate is multiplied by ``lr_gamma``.
         soft_decode: decode predictions by soft-arg-max (else arg-max) for the metrics.
         config: the resolved run config, stored in every checkpoint.
+        outline_jitter: the share of each training batch's samples whose outline is perturbed
+            before the network sees it (``data.outline_jitter``, :mod:`unps.lightnet.outline`);
+            the draws are a function of ``seed`` and the step, so a resumed run goes on as it ran.
+        seed: the run's seed.
     """
 
     def __init__(self, net: LightNet, lr: float = 5e-4, lr_milestones: tuple[int, ...] = (),
