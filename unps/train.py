@@ -120,20 +120,6 @@ def resumed_run(cfg: DictConfig, overrides: Sequence[str]) -> tuple[DictConfig, 
     return cfg, start_step
 
 
-def checked_share(value, name: str) -> float:
-    """A share in [0, 1] from the config.
-
-    Raises:
-        InputError: not a number in [0, 1]; the message names the option.
-
-    >>> checked_share(0.5, "data.outline_jitter")
-    0.5
-    """
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 1:
-        raise InputError(f"{name} is the share of samples it applies to, a number in [0, 1]; got {value!r}")
-    return float(value)
-
-
 def checked_precision(cfg: DictConfig) -> str:
     """``cfg.recipe.precision`` (float32 for runs saved before the option), once the seed and it
     are checked.
@@ -185,11 +171,14 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
     from unps.io.files import write_json
     from unps.lightnet.callbacks import LightSamples, SampleRate
     from unps.lightnet.data import LightData
+    from unps.lightnet.synthesis import check_share
     from unps.lightnet.system import LightEstimation
 
     out = Path(cfg.paths.output_dir)
     cfg, start_step = resumed_run(cfg, overrides)
     precision = checked_precision(cfg)
+    # .get: the configs of runs saved before the option lack it
+    outline_jitter = check_share("data.outline_jitter", cfg.data.get("outline_jitter", 0.0))
     L.seed_everything(cfg.seed, workers=True, verbose=False)
     torch.set_num_threads(cfg.recipe.threads or torch.get_num_threads())
     device = resolve_device(cfg.get("device", "auto"))   # runs saved before the option lack it
@@ -202,9 +191,7 @@ def train(cfg: DictConfig, overrides: Sequence[str] = ()) -> dict:
                              lr_milestones=tuple(cfg.recipe.lr_milestones),
                              lr_gamma=cfg.recipe.lr_gamma, soft_decode=cfg.soft_decode,
                              config=OmegaConf.to_container(cfg, resolve=True),
-                             outline_jitter=checked_share(cfg.data.get("outline_jitter", 0.0),
-                                                          "data.outline_jitter"),
-                             seed=cfg.seed)
+                             outline_jitter=outline_jitter, seed=cfg.seed)
     rate = SampleRate(skip=min(5, cfg.recipe.max_steps // 2))
     progress = ProgressLog(shown=PROGRESS, logger=log, after_validation=True)
     callbacks = [LightSamples(), LearningRateMonitor(), rate, progress]

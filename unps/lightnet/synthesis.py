@@ -43,6 +43,17 @@ LEVEL_SAMPLES = 8192
 """About this many of a stack's object values (evenly spaced) set its 99th percentile."""
 
 
+def check_share(name: str, share: float) -> float:
+    """``share``, a share of the training samples that setting ``name`` applies to.
+
+    Raises:
+        InputError: ``share`` is not in [0, 1]; the message names the setting.
+    """
+    if not 0 <= share <= 1:
+        raise InputError(f"{name} is a share of the samples, in 0…1; got {share}")
+    return share
+
+
 class LightDataset(Dataset):
     """Synthetic photometric-stereo stacks with their lights, item i a function of (seed, i).
 
@@ -108,8 +119,7 @@ class LightDataset(Dataset):
         shares = dict(paint=paint, second_material=second_material, interreflection=interreflection,
                       narrowed_intensities=narrowed_intensities, room_light=room_light)
         for name, share in shares.items():
-            if not 0 <= share <= 1:
-                raise InputError(f"{name} is a share of the samples, in 0…1; got {share}")
+            check_share(name, share)
         self.shapes = dict(shapes) if shapes else {"blob": 1.0}
         self.layouts = dict(layouts) if layouts else {"cap": 1.0}
         check_weights(self.shapes, SHAPES, "shape families")
