@@ -1228,7 +1228,7 @@ def test_light_benchmark_diligent_rig_group_lights_the_same_objects_with_diligen
     scenes = benchmark.scenes
     for on_rig, drawn in zip(scenes.ON_DILIGENT_RIG, scenes.OBJECTS):
         assert dataclasses.replace(on_rig, rig="drawn") == drawn and on_rig.key() != drawn.key()
-    spec = {k: v for k, v in dataclasses.asdict(scenes.OBJECTS[0]).items() if k != "rig"}
+    spec = {k: v for k, v in dataclasses.asdict(scenes.OBJECTS[0]).items() if k not in ("rig", "outline")}
     assert scenes.OBJECTS[0].key() == scenes.hashlib.sha256(json.dumps(
         {**spec, "version": scenes.SCENE_VERSION, "resolution": scenes.RESOLUTION, "spp": scenes.SPP,
          "bounces": scenes.BOUNCES, "camera": scenes.CAMERA_VERSION}, sort_keys=True).encode()).hexdigest()[:10]
@@ -1273,6 +1273,43 @@ def test_light_benchmark_renders_without_interreflections_when_traced_to_two_bou
     found = benchmark.cases(["benchmark", "single"], ["12"], tmp_path, tmp_path, names=["pits"], bounces=2)
     assert [read() for *_, read in found] == ["pits", "pits"]
     assert [obj.bounces for obj in made] == [2, 2]
+
+
+@pytest.mark.slow
+def test_light_benchmark_partial_outline_adds_the_pixels_an_object_covers_in_part(tmp_path, monkeypatch):
+    """``--outline partial``: the pixels the object covers whole are rendered as the exact
+    outline renders them; the ones it covers in part are added, dimmer than the whole ones beside
+    them, and masked where it covers at least half; cached apart, the exact outline's keys kept."""
+    data = SHARED_DATA
+    if not (data / "merl_nbrdf").is_dir():
+        pytest.skip(f"MERL fits not found at {data / 'merl_nbrdf'}")
+    benchmark = load_script("lb_benchmark", "experiments/light_benchmark/benchmark.py")
+    scenes = benchmark.scenes
+    blob = scenes.OBJECTS[0]
+    partial = dataclasses.replace(blob, outline="partial")
+    assert blob.outline == "exact" and partial.key() != blob.key()
+    directions = np.array([[0.0, 0.0, 1.0], [0.5, 0.3, 0.81]])
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    rig = scenes.Rig({"2": directions}, {"2": np.ones((2, 3))})
+    exact, _, _, whole = scenes.render_radiance(blob, data, rig)
+    drawn, normals, depth, mask = scenes.render_radiance(partial, data, rig)
+    ring = mask & ~whole
+    assert (mask >= whole).all() and ring.sum() > 50
+    np.testing.assert_allclose(drawn["2"][:, whole], exact["2"][:, whole], atol=1e-3)
+    assert np.all(exact["2"][:, ~whole] == 0) and (drawn["2"][:, ~mask].max(-1) > 0).sum() > 50
+    assert np.isfinite(depth[mask]).all() and np.allclose(np.linalg.norm(normals[mask], axis=-1), 1, atol=1e-5)
+    inner = whole & ~(-scenes.torch.nn.functional.max_pool2d(
+        -scenes.torch.as_tensor(whole, dtype=scenes.torch.float32)[None], 3, 1, 1)[0].numpy() > 0.5)
+    frontal = drawn["2"][0].mean(-1)
+    assert frontal[ring].mean() < 0.9 * frontal[inner].mean()
+
+    made = []
+    monkeypatch.setattr(scenes, "make_captures", lambda obj, data, cache: made.append(obj) or {"12": tmp_path})
+    monkeypatch.setattr(benchmark, "read_diligent", lambda folder, name, quantization: name)
+    found = benchmark.cases(["benchmark", "diligent-rig"], ["12"], tmp_path, tmp_path, names=["pits"],
+                            outline="partial")
+    assert [read() for *_, read in found] == ["pits", "pits"]
+    assert [obj.outline for obj in made] == ["partial", "partial"]
 
 
 @pytest.mark.parametrize("option, value, message", [

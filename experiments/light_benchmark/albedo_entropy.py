@@ -30,7 +30,7 @@ from unps.metrics import angular_error
 from unps.solvers.rpca import partial_sum_rpca
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from benchmark import case_parser, cases, light_source  # noqa: E402
+from benchmark import asked_cases, case_parser, light_source  # noqa: E402
 
 BIN_EDGES = np.linspace(-3.0, 3.0, 601)      # log albedo, relative to the median
 PARZEN_SIGMA = 0.05
@@ -81,7 +81,7 @@ def main() -> None:
     network, _ = light_source([], [])
     print(f"{'case':<28} {'network':>8} {'least H':>8}   entropy: {'true':>6} {'network':>7} {'least':>6}")
     rows = []
-    for group, name, label, read in cases(args.only, args.sets, args.data, args.cache, args.names):
+    for group, name, label, read in asked_cases(args):
         subject = read()
         lights = network(subject)
         gray = subject.observed_images()[:, subject.mask].mean(-1)                     # (n, m)

@@ -183,7 +183,8 @@ def main() -> None:
     out = args.out or args.cache / "bas_relief_left"
     try:
         runs.claim(out, {"study": "bas_relief_left", "scales": args.scales,
-                         "room_light": args.room_light, "weights": runs.weights_digest(None)})
+                         "room_light": args.room_light, "weights": runs.weights_digest(None),
+                         **({"outline": args.outline} if args.outline != "exact" else {})})
     except ValueError as e:
         parser.error(str(e))
     network, _ = light_source([], [])

@@ -6,6 +6,7 @@
     python experiments/light_benchmark/benchmark.py --set selfcal.gbr_weight=0.1 --tag gbr01
     python experiments/light_benchmark/benchmark.py --only benchmark --bounces 2 --tag direct-only
     python experiments/light_benchmark/benchmark.py --room-light 0.01 --tag room0.01
+    python experiments/light_benchmark/benchmark.py --only benchmark --outline partial --tag partial
 
 The cases (none of them feeds training):
 
@@ -27,6 +28,10 @@ The cases (none of them feeds training):
 
 ``--bounces 2`` renders the first three groups' objects with the direct light alone, cast shadows
 included and no interreflection (cached apart): what the stages would give if there were none.
+``--outline partial`` renders the first three groups' objects with the pixels they cover in part,
+dimmed by the share they cover, and masks the pixels covered at least half (cached apart;
+``scenes.OUTLINES``): the outline a photograph and a drawn mask give, where the default's holds
+only the pixels the object covers whole.
 ``--room-light L`` adds to every case the light of a room no dark frame took out
 (:func:`with_room_light`): the same in every captured image, L × the captures' 99th percentile
 at the object's mean albedo, as photographs outside a blacked-out rig hold (DiLiGenT's ball holds
@@ -69,6 +74,9 @@ DEFAULT_CACHE = Path("~/.cache/unps/light_benchmark").expanduser()
 DILIGENT = ("ball", "cat", "pot1")
 GROUPS = ("benchmark", "single", "diligent-rig", "diligent", "synthetic")
 DEFAULT_GROUPS = ("benchmark", "diligent", "synthetic")
+OUTLINE_HELP = ("the rendered objects' outline: exact (default), the pixels they cover whole and "
+                "nothing else; partial, also those they cover in part, dimmed, the mask holding "
+                "those covered at least half (rendered on first use and cached apart)")
 RAISED, RAISED_TWICE = 1.0, 2.0     # degrees: a stage that raised the error by more is flagged
 
 
@@ -92,18 +100,19 @@ def with_room_light(subject, level: float):
 
 
 def cases(groups, sets, data: Path, cache: Path, names=None, bounces: int = scenes.BOUNCES,
-          room_light: float = 0.0):
+          room_light: float = 0.0, outline: str = "exact"):
     """(group, name, light set, function reading the subject) for every case asked for, the
-    rendered objects' interreflections traced to ``bounces`` (2: none), with a room's light of
-    ``room_light`` (:func:`with_room_light`; 0: none added)."""
-    for group, name, label, read in _cases(groups, sets, data, cache, names, bounces):
+    rendered objects' interreflections traced to ``bounces`` (2: none) and their outline drawn as
+    ``outline`` (``scenes.OUTLINES``), with a room's light of ``room_light``
+    (:func:`with_room_light`; 0: none added)."""
+    for group, name, label, read in _cases(groups, sets, data, cache, names, bounces, outline):
         if room_light:
             yield group, name, label, lambda read=read: with_room_light(read(), room_light)
         else:
             yield group, name, label, read
 
 
-def _cases(groups, sets, data: Path, cache: Path, names, bounces: int):
+def _cases(groups, sets, data: Path, cache: Path, names, bounces: int, outline: str):
     for group, objects in (("benchmark", scenes.OBJECTS), ("single", scenes.SINGLE_MATERIAL),
                            ("diligent-rig", scenes.ON_DILIGENT_RIG)):
         if group not in groups:
@@ -111,7 +120,7 @@ def _cases(groups, sets, data: Path, cache: Path, names, bounces: int):
         for obj in objects:
             if names and obj.name not in names:
                 continue
-            obj = replace(obj, bounces=bounces)
+            obj = replace(obj, bounces=bounces, outline=outline)
             for label in sets:
                 def read(obj=obj, label=label):
                     folder = scenes.make_captures(obj, data, cache)[label]
@@ -148,6 +157,7 @@ def case_parser(description: str, groups=DEFAULT_GROUPS) -> argparse.ArgumentPar
     parser.add_argument("--room-light", type=float, default=0.0,
                         help="add the light of a room to every image: this share of the captures' "
                              "99th percentile times the albedo (default 0: none)")
+    parser.add_argument("--outline", choices=scenes.OUTLINES, default="exact", help=OUTLINE_HELP)
     return parser
 
 
@@ -168,7 +178,21 @@ def study_cases(args):
 
     logging.basicConfig(level=logging.ERROR, format="%(name)s: %(message)s")
     torch.set_num_threads(args.threads)
-    return cases(args.only, args.sets, args.data, args.cache, args.names, room_light=args.room_light)
+    return asked_cases(args)
+
+
+def asked_cases(args):
+    """The cases :func:`case_parser`'s parsed ``args`` ask for (:func:`cases`)."""
+    return cases(args.only, args.sets, args.data, args.cache, args.names, room_light=args.room_light,
+                 outline=args.outline)
+
+
+def capture_options(args) -> dict:
+    """The options of :func:`case_parser`'s parsed ``args`` that change the captures, those not at
+    their defaults: a study claims its results folder with them, so that none mixes rows of
+    captures made otherwise."""
+    return ({"room_light": args.room_light} if args.room_light else {}) | \
+        ({"outline": args.outline} if args.outline != "exact" else {})
 
 
 def selfcal_study(description: str, folder: str, made_with: dict, run_case, summarise, progress,
@@ -194,7 +218,8 @@ def selfcal_study(description: str, folder: str, made_with: dict, run_case, summ
         settings = (defaults or {}) | {key: ast.literal_eval(value)
                                        for key, value in (s.split("=", 1) for s in args.settings)}
         selfcal = SelfCalibration(device="cpu", **settings)
-        runs.claim(out, {**made_with, "settings": args.settings, "weights": runs.weights_digest(None)})
+        runs.claim(out, {**made_with, "settings": args.settings, "weights": runs.weights_digest(None),
+                         **capture_options(args)})
     except (ValueError, TypeError, SyntaxError) as e:
         parser.error(str(e))
     print(report(runs.summaries(cases, out, lambda subject: run_case(subject, selfcal), summarise,
@@ -208,7 +233,7 @@ def network_study(parser, args, out: Path, made_with: dict, run_case, report, pr
     those kept), and ``report(rows)`` printed."""
     cases = study_cases(args)
     try:
-        runs.claim(out, {**made_with, "weights": runs.weights_digest(None)})
+        runs.claim(out, {**made_with, "weights": runs.weights_digest(None), **capture_options(args)})
     except ValueError as e:
         parser.error(str(e))
     network, _ = light_source([], [])
@@ -385,6 +410,7 @@ def main():
     parser.add_argument("--room-light", type=float, default=0.0,
                         help="add the light of a room to every image: this share of the captures' "
                              "99th percentile times the albedo (default 0: none; with_room_light)")
+    parser.add_argument("--outline", choices=scenes.OUTLINES, default="exact", help=OUTLINE_HELP)
     parser.add_argument("--list", action="store_true", help="print the objects as a Markdown table and stop")
     parser.add_argument("--verbose", action="store_true")
     args = parser.parse_args()
@@ -415,6 +441,8 @@ def main():
             claimed["bounces"] = args.bounces
         if args.room_light:
             claimed["room_light"] = args.room_light
+        if args.outline != "exact":
+            claimed["outline"] = args.outline
         runs.claim(out, claimed)
     except (ValueError, InputError) as e:
         parser.error(str(e))
@@ -422,12 +450,13 @@ def main():
           f"{' '.join(args.settings) or 'defaults'}"
           + ("" if args.bounces == scenes.BOUNCES else f"; renders traced to {args.bounces} bounces")
           + (f"; a room's light of {args.room_light:g} added" if args.room_light else "")
+          + ("" if args.outline == "exact" else f"; outlines {args.outline}")
           + f"; results in {out}")
     print(f"{'group':<9} {'case':<12} {'set':>3} {'network':>8} "
           + " ".join(f"{s:>9}" for s in stage_names) + f" {'final':>8} {'int':>6} {'time':>6}  raised")
     results = {}
     for group, name, label, read in cases(args.only, args.sets, args.data, args.cache, args.names,
-                                          args.bounces, args.room_light):
+                                          args.bounces, args.room_light, args.outline):
         path = out / f"{group}-{name}-{label}.json"
         result = json.loads(path.read_text()) if path.is_file() else None
         why = None if result is None else stale(result, made_with)

@@ -44,8 +44,7 @@ def main():
     args = benchmark.case_parser(__doc__.split("\n")[0]).parse_args()
     logging.basicConfig(level=logging.ERROR)
     held = frame_held(replace(SelfCalibration(), max_flattening_deg=None, device="cpu"))
-    for group, name, label, read in benchmark.cases(args.only, args.sets, args.data, args.cache, args.names,
-                                                    room_light=args.room_light):
+    for group, name, label, read in benchmark.asked_cases(args):
         subject, began = read(), time.time()
         lights, _ = network_lights(subject, device="cpu")
         row = {}

@@ -162,7 +162,8 @@ def main() -> None:
     out = args.out or args.cache / "decoding"
     try:
         runs.claim(out, {"study": "decoding", "decodings": list(DECODINGS),
-                         "weights": runs.weights_digest(None)})
+                         "weights": runs.weights_digest(None),
+                         **benchmark.capture_options(args)})
     except ValueError as e:
         parser.error(str(e))
     net, config = load_lightnet(None)

@@ -40,7 +40,7 @@ from unps.metrics import angular_error
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from albedo_entropy import bas_relief  # noqa: E402
-from benchmark import case_parser, cases, light_source  # noqa: E402
+from benchmark import asked_cases, case_parser, light_source  # noqa: E402
 
 WINDOW = 7              # pixels: a maximum is the brightest of its WINDOW × WINDOW neighbours
 SMOOTH_PX = 2.0         # the images and the scaled normals are smoothed (Gaussian σ, pixels)
@@ -129,7 +129,7 @@ def main() -> None:
     print(f"{'case':<28} {'network':>8} {'turned':>8} {'maxima':>7}   maxima to lights: "
           f"{'network':>7} {'turned':>7} {'true':>6}")
     rows = []
-    for group, name, label, read in cases(args.only, args.sets, args.data, args.cache, args.names):
+    for group, name, label, read in asked_cases(args):
         subject = read()
         lights = network(subject)
         gray = subject.observed_images()[:, subject.mask].mean(-1)                     # (n, m)

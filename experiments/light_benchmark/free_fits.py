@@ -166,7 +166,8 @@ def main():
     out = args.out or args.cache / "free_fits"
     try:
         runs.claim(out, {"scenes": scenes.SCENE_VERSION, "held": repr(HELD), "free": repr(FREE),
-                         "weights": runs.weights_digest(None)})
+                         "weights": runs.weights_digest(None),
+                         **benchmark.capture_options(args)})
     except ValueError as e:
         parser.error(str(e))
     print(report(runs.summaries(cases, out, run_case, summarise, progress, args.report)))

@@ -39,7 +39,7 @@ from unps.metrics import angular_error
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from albedo_entropy import bas_relief  # noqa: E402
-from benchmark import case_parser, cases, light_source  # noqa: E402
+from benchmark import asked_cases, case_parser, light_source  # noqa: E402
 
 CAP_DEG = 15.0          # an angle between a diffuse normal and its half vector counts at most this
 
@@ -122,7 +122,7 @@ def main() -> None:
           f"{'pixels':>6} {'diffuse-half':>12} {'half-true':>9} {'diffuse-true':>12}")
     diffuse = (args.away, args.min_images, args.max_misfit)
     rows = []
-    for group, name, label, read in cases(args.only, args.sets, args.data, args.cache, args.names):
+    for group, name, label, read in asked_cases(args):
         subject = read()
         lights = network(subject)
         gray = subject.observed_images()[:, subject.mask].mean(-1)                      # (n, m)

@@ -148,7 +148,8 @@ def selfcal_moves(args) -> None:
     """The self-calibration's move on each case, split as :func:`decompose` splits it."""
     out = args.cache / "results" / "selfcal_moves"
     try:
-        runs.claim(out, {"scenes": scenes.SCENE_VERSION, "weights": runs.weights_digest(None)},
+        runs.claim(out, {"scenes": scenes.SCENE_VERSION, "weights": runs.weights_digest(None),
+                         **benchmark.capture_options(args)},
                    way_out="delete the folder to run the study again")
     except ValueError as e:
         sys.exit(str(e))

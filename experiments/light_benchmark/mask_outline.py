@@ -14,8 +14,9 @@ mask, the default stages too (``light=selfcal``: network, reversal test, self-ca
 ``python -m unps.fit`` runs them. The benchmark's captures are rendered with the mask of the
 pixels the object covers whole and nothing outside it (``scenes.py``), so their outline holds
 no pixel partly object and partly background; DiLiGenT's photographs do, and their masks were
-drawn to include them. ``--network-only`` leaves the default stages out; ``--checkpoint`` reads
-other weights (give each its own ``--out``). None of it feeds a stage. Results are kept case by
+drawn to include them, as ``--outline partial`` renders and masks the benchmark's.
+``--network-only`` leaves the default stages out; ``--checkpoint`` reads other weights (give each
+its own ``--out``). None of it feeds a stage. Results are kept case by
 case in ``--out`` (default ``<cache>/mask_outline``); a rerun resumes.
 """
 
@@ -119,7 +120,8 @@ def main() -> None:
     try:
         made_with = {"study": "mask_outline", "light": benchmark.light_settings(None, settings),
                      "weights": benchmark.weights_used(settings)}
-        runs.claim(out, made_with | ({"network_only": True} if args.network_only else {}))
+        runs.claim(out, made_with | ({"network_only": True} if args.network_only else {})
+                   | benchmark.capture_options(args))
     except ValueError as e:
         parser.error(str(e))
     network, _ = benchmark.light_source([], settings)

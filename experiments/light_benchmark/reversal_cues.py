@@ -120,8 +120,7 @@ def main():
     print(f"{'group':<9} {'case':<12} {'set':>3} {'network':>8} {'turned':>7} {'inside out':>10} "
           f"{'rlift':>6} {'clift':>6} {'contour':>8} {'level':>6} {'cur':>6} {'rev':>6} {'pairs':>6} "
           f"{'flat':>13} {'pixel':>13} {'pairs':>6} {'change':>6} {'scale':>6} {'warns':>5}")
-    for group, name, label, read in benchmark.cases(args.only, args.sets, args.data, args.cache, args.names,
-                                                               room_light=args.room_light):
+    for group, name, label, read in benchmark.asked_cases(args):
         subject = read()
         lights, _ = network_lights(subject, device="cpu")
         error = angular_error(lights.directions, subject.light_directions).mean()

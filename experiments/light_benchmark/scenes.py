@@ -10,17 +10,21 @@ storage (8-bit rounded, 8-bit truncated from 16 bits as DiLiGenT's crops were ma
 
 How an image is made (one per light i, directional, RGB intensity e_i):
 
-- Mitsuba 3 traces the geometry: ground-truth normals, depth and the mask of fully covered
-  pixels; and, for each light, the object rendered with a uniform diffuse stand-in material of
-  albedo :data:`STAND_IN` once with direct light only (D_i) and once with up to
-  :data:`BOUNCES` bounces (F_i), with the same samples. D_i / (a·max(n·l_i, 0)) is the share of
-  each pixel the light reaches (cast shadows, antialiased), and F_i − D_i the interreflected light.
+- Mitsuba 3 traces the geometry: ground-truth normals, depth and each pixel's coverage c; and,
+  for each light, the object rendered with a uniform diffuse stand-in material of albedo
+  :data:`STAND_IN` once with direct light only (D_i) and once with up to :data:`BOUNCES` bounces
+  (F_i), with the same samples. D_i / (a·c·max(n·l_i, 0)) is the share of each pixel the light
+  reaches (cast shadows, antialiased), and F_i − D_i the interreflected light.
 - The direct light is the MERL material's own reflectance, e_i·π·f(l_i, v)·max(n·l_i, 0) times
-  that share, with f from the neural fit of the pixel's material and a smooth albedo texture.
+  that share and c, with f from the neural fit of the pixel's material and a smooth albedo texture.
 - The interreflected light is F_i − D_i rescaled from the stand-in's albedo to the receiving
   pixel's (the material's directional-hemispherical albedo, in units where the matte white
   standard of :data:`WHITE` has its real albedo) and the object's mean: a diffuse approximation
   of the interreflections of glossy materials, close for matte ones.
+- The outline (:data:`OUTLINES`): ``exact`` renders the pixels the object covers whole and
+  nothing else, the mask exactly those; ``partial`` also renders the pixels it covers in part, as
+  the covered share's light on a black background, and the mask holds the pixels covered at
+  least :data:`DRAWN_AT`, as someone drawing a capture's mask would draw it.
 
 Frame: x right, y up, z toward the camera (orthographic, looking down −z at [−1, 1]²).
 """
@@ -48,7 +52,8 @@ from unps.lightnet.brdf import read_neural_brdf
 from unps.lightnet.materials import HELD_OUT_MERL
 from unps.lightnet.rig import cap_lights, dome_lights, ring_lights
 from unps.synthetic import shapes, vessels
-from unps.synthetic.render import _ground_truth, _scene, _write_mesh, procedural_albedo, set_variant
+from unps.synthetic.render import (FULL_COVERAGE, _scene, _traced, _write_mesh, procedural_albedo,
+                                   set_variant)
 
 RESOLUTION = 128
 SPP = 16                 # a square: the stratified sampler's grid
@@ -58,6 +63,8 @@ WHITE = ("white-diffuse-bball", 0.85)   # a matte white standard and the albedo 
                          # fits' units make it 0.28, so every material's albedo is scaled alike
 LIGHT_SETS = {"96": 96, "20": 20, "12": 12}
 FORMATS = ("floor8", "round8", "png16")
+OUTLINES = ("exact", "partial")
+DRAWN_AT = 0.5           # a partial outline's mask: the pixels the object covers at least half of
 SCENE_VERSION = 1        # bump when a change here alters the rendered radiance
 CAMERA_VERSION = 2       # bump when a change to the camera alters the captures
 
@@ -77,6 +84,7 @@ class BenchmarkObject:
             intensities as ball's files give them (:func:`diligent_rig`).
         bounces: the path tracer's longest path for the interreflections (:data:`BOUNCES`); 2
             renders the direct light alone, cast shadows included and no interreflection.
+        outline: one of :data:`OUTLINES` (module docstring).
     """
 
     name: str
@@ -86,13 +94,16 @@ class BenchmarkObject:
     seed: int
     rig: str = "drawn"
     bounces: int = BOUNCES
+    outline: str = "exact"
 
     def key(self, camera: bool = True) -> str:
         """A short hash of everything that makes its radiance (and, with ``camera``, its captures);
-        the drawn rig, the first, adds nothing to it."""
+        the drawn rig and the exact outline, the first of each, add nothing to it."""
         spec = {**asdict(self), "version": SCENE_VERSION, "resolution": RESOLUTION, "spp": SPP}
         if self.rig == "drawn":
             del spec["rig"]
+        if self.outline == "exact":               # the captures rendered before it was an option
+            del spec["outline"]
         if camera:
             spec["camera"] = CAMERA_VERSION
         return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:10]
@@ -334,7 +345,8 @@ def render_radiance(obj: BenchmarkObject, data: Path, rig: Rig, progress=None):
     """Radiance of every light of every set, with the ground truth.
 
     Returns:
-        {label: (n, H, W, 3) float32 radiance}, normals (H, W, 3), depth (H, W), mask (H, W).
+        {label: (n, H, W, 3) float32 radiance}, normals (H, W, 3), depth (H, W), mask (H, W): the
+        truth on the mask, as ``obj.outline`` draws it.
     """
     import mitsuba as mi
 
@@ -344,7 +356,9 @@ def render_radiance(obj: BenchmarkObject, data: Path, rig: Rig, progress=None):
     set_variant("scalar_rgb")
     with tempfile.TemporaryDirectory() as tmp:
         path = _write_mesh(mesh, Path(tmp))
-        normals, depth, mask = _ground_truth(path, RESOLUTION, obj.seed)
+        normals, depth, coverage = _traced(path, RESOLUTION, obj.seed)
+        whole = (coverage > FULL_COVERAGE) & np.isfinite(depth)
+        shown, mask, share = outline(whole, coverage, np.isfinite(depth), obj.outline)
         stand_in = {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": STAND_IN}}
         scenes = {bounces: _scene(path, stand_in, {"type": "path", "max_depth": bounces},
                                   RESOLUTION, SPP, "stratified") for bounces in {2, obj.bounces}}
@@ -353,32 +367,60 @@ def render_radiance(obj: BenchmarkObject, data: Path, rig: Rig, progress=None):
         white = hemispherical_albedo(read_neural_brdf(data / "merl_nbrdf" / f"{WHITE[0]}.h5")).mean()
         units = WHITE[1] / white
         albedos = np.stack([hemispherical_albedo(b) for b in brdfs]) * units         # (k, 3)
-        which = material_map(mask, len(brdfs), obj.seed)[mask]
-        texture = procedural_albedo(obj.seed, RESOLUTION, feature=0.05, contrast=0.15)[mask]
+        which = material_map(whole, len(brdfs), obj.seed)[shown]
+        texture = procedural_albedo(obj.seed, RESOLUTION, feature=0.05, contrast=0.15)[shown]
         receiving = np.minimum(albedos[which] * texture, 0.95)                   # (m, 3)
         mean_albedo = receiving.mean(0)
         out = {}
         for label, directions in rig.directions.items():
-            direct = np.zeros((len(directions), int(mask.sum()), 3), np.float32)
+            direct = np.zeros((len(directions), int(shown.sum()), 3), np.float32)
             for k, brdf in enumerate(brdfs):
-                direct[:, which == k] = direct_light(normals[mask][which == k], brdf, directions)
+                direct[:, which == k] = direct_light(normals[shown][which == k], brdf, directions)
             direct *= texture[None] * units
-            shading = np.clip(normals[mask] @ directions.T, 0, None).T              # (n, m)
-            images = np.zeros((len(directions), *mask.shape, 3), np.float32)
+            shading = np.clip(normals[shown] @ directions.T, 0, None).T             # (n, m)
+            images = np.zeros((len(directions), *shown.shape, 3), np.float32)
             for i, light in enumerate(directions):
                 seed = obj.seed * 7919 + i
                 only_direct = _render(scenes[2], params[2], light, seed)
                 full = (_render(scenes[obj.bounces], params[obj.bounces], light, seed)
                         if obj.bounces > 2 else only_direct)
-                lit = np.where(shading[i] > 0.02, only_direct[mask].mean(-1)
-                               / (STAND_IN * np.maximum(shading[i], 0.02)), 1.0).clip(0, 1)
-                bounced = np.clip(full - only_direct, 0, None)[mask] * (receiving / STAND_IN) \
+                lit = np.where(shading[i] > 0.02, only_direct[shown].mean(-1)
+                               / (STAND_IN * np.maximum(shading[i], 0.02) * share), 1.0).clip(0, 1)
+                bounced = np.clip(full - only_direct, 0, None)[shown] * (receiving / STAND_IN) \
                     * (mean_albedo / STAND_IN)
-                images[i][mask] = direct[i] * lit[:, None] + bounced
+                images[i][shown] = direct[i] * (lit * share)[:, None] + bounced
                 if progress:
                     progress()
             out[label] = images * rig.intensities[label][:, None, None, :].astype(np.float32)
-    return out, normals, depth, mask
+    normals = np.where(mask[..., None], normals, 0)
+    return out, normals, np.where(mask, depth, np.nan), mask
+
+
+def outline(whole: np.ndarray, coverage: np.ndarray, finite: np.ndarray, kind: str
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Which pixels an outline of ``kind`` (:data:`OUTLINES`) renders and masks.
+
+    Args:
+        whole: (H, W) bool, the pixels the object covers whole.
+        coverage: (H, W) the share of each pixel the object covers.
+        finite: (H, W) bool, the pixels with a finite normal and depth.
+
+    Returns:
+        shown (H, W) bool, the pixels rendered; mask (H, W) bool, the capture's mask; share (m,)
+        the coverage of the m shown pixels (1 on the whole ones).
+
+    >>> coverage = np.array([[0.0, 0.3, 0.7, 1.0]])
+    >>> shown, mask, share = outline(coverage == 1, coverage, coverage >= 0, "partial")
+    >>> shown.astype(int).tolist(), mask.astype(int).tolist(), share.tolist()
+    ([[0, 1, 1, 1]], [[0, 0, 1, 1]], [0.3, 0.7, 1.0])
+    """
+    if kind == "exact":
+        return whole, whole, np.ones(int(whole.sum()))
+    if kind != "partial":
+        raise ValueError(f"outline must be one of {OUTLINES}, got {kind!r}")
+    shown = (coverage > 0) & finite
+    share = np.where(whole, 1.0, coverage)[shown]
+    return shown, shown & (coverage >= DRAWN_AT), share
 
 
 def _render(scene, params, light: np.ndarray, seed: int) -> np.ndarray:

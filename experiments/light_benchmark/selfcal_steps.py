@@ -249,7 +249,8 @@ def main(argv=None) -> None:
         parser.error(f"--limit: {e}")
     try:
         runs.claim(out, {"steps": args.steps, "scenes": scenes.SCENE_VERSION, "fits": "held, then pulled",
-                         "light": light, "weights": runs.weights_digest(None)})
+                         "light": light, "weights": runs.weights_digest(None),
+                         **benchmark.capture_options(args)})
     except ValueError as e:
         parser.error(str(e))
     print(f"network → reversal test → self-calibration (the frame held, then pulled where that "

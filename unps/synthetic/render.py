@@ -187,6 +187,22 @@ def _write_mesh(mesh: Mesh, folder: Path) -> Path:
 
 def _ground_truth(mesh_file: Path, resolution: int, seed: int
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    normals, depth, coverage = _traced(mesh_file, resolution, seed)
+    mask = (coverage > FULL_COVERAGE) & np.isfinite(depth)
+    normals[~mask] = 0
+    return normals, np.where(mask, depth, np.nan).astype(np.float32), mask
+
+
+def _traced(mesh_file: Path, resolution: int, seed: int
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What the camera sees of the mesh, pixel by pixel, from Mitsuba's AOVs (no shading).
+
+    Returns:
+        normals (H, W, 3), the unit mean of the normals the pixel's samples hit, facing the
+        camera (0 where none is finite); depth (H, W) along +z in pixel units of those samples
+        (NaN where no finite normal or depth); coverage (H, W), the share of its samples that hit
+        the object, in [0, 1].
+    """
     import mitsuba as mi
 
     white = {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": 1.0}}
@@ -196,13 +212,13 @@ def _ground_truth(mesh_file: Path, resolution: int, seed: int
     coverage, normals, position = truth[..., 0], truth[..., 3:6], truth[..., 6:9]
     # degenerate faces of a foreign mesh can leave NaN normals: such pixels are not ground truth
     finite = np.isfinite(normals).all(-1) & np.isfinite(position[..., 2])
-    mask = (coverage > FULL_COVERAGE) & finite
     normals = np.where(finite[..., None], normals, 0)
     normals = normals / np.maximum(np.linalg.norm(normals, axis=-1), 1e-12)[..., None]
     normals *= np.where(normals[..., 2:] < 0, -1, 1)            # the side the camera sees
-    normals[~mask] = 0
-    depth = np.where(mask, position[..., 2] * resolution / 2, np.nan)   # pixel pitch 2/resolution
-    return normals.astype(np.float32), depth.astype(np.float32), mask
+    # the AOVs average over the pixel's samples, background ones giving 0: z over coverage
+    depth = np.where(finite & (coverage > 0), position[..., 2] / np.maximum(coverage, 1e-12), np.nan)
+    return (normals.astype(np.float32), (depth * resolution / 2).astype(np.float32),
+            np.clip(coverage, 0, 1).astype(np.float32))
 
 
 def render_ground_truth(mesh: Mesh, resolution: int, variant: str = "scalar_rgb", seed: int = 0
