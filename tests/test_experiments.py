@@ -1312,6 +1312,34 @@ def test_light_benchmark_partial_outline_adds_the_pixels_an_object_covers_in_par
     assert [obj.outline for obj in made] == ["partial", "partial"]
 
 
+@pytest.mark.slow
+def test_light_benchmark_renders_the_same_object_at_another_resolution():
+    """``--resolution``: the object at another size is the same object — its patches of material
+    and its texture stretched, not drawn again — so that its image at half the size is its image
+    at the default shrunk; cached apart, the default's keys kept."""
+    data = SHARED_DATA
+    if not (data / "merl_nbrdf").is_dir():
+        pytest.skip(f"MERL fits not found at {data / 'merl_nbrdf'}")
+    benchmark = load_script("lb_benchmark", "experiments/light_benchmark/benchmark.py")
+    scenes = benchmark.scenes
+    blob = scenes.OBJECTS[0]
+    half = dataclasses.replace(blob, resolution=scenes.RESOLUTION // 2)
+    assert blob.resolution == scenes.RESOLUTION and half.key() != blob.key()
+    rig = scenes.Rig({"1": np.array([[0.3, 0.2, 0.93]])}, {"1": np.ones((1, 3))})
+    full, _, _, mask = scenes.render_radiance(blob, data, rig)
+    small, _, _, small_mask = scenes.render_radiance(half, data, rig)
+    assert small["1"].shape == (1, scenes.RESOLUTION // 2, scenes.RESOLUTION // 2, 3)
+    side = scenes.RESOLUTION // 2
+    shrunk = full["1"][0].reshape(side, 2, side, 2, 3).mean((1, 3))
+    whole = mask.reshape(side, 2, side, 2).all((1, 3)) & small_mask
+    relative = np.abs(small["1"][0] - shrunk)[whole].mean(-1) / shrunk[whole].mean(-1).clip(1e-3)
+    assert whole.sum() > 500 and np.median(relative) < 0.05
+    for text in ("63", "128.5", "big"):
+        with pytest.raises(benchmark.argparse.ArgumentTypeError, match="at least 64"):
+            benchmark.resolution(text)
+    assert benchmark.resolution("256") == 256
+
+
 @pytest.mark.parametrize("option, value, message", [
     ("--bounces", "1", "--bounces is the path tracer's longest path, at least 2 (direct light), got 1"),
     ("--room-light", "-0.01", "--room-light is a share of the captures' 99th percentile, at least 0, got -0.01"),

@@ -77,7 +77,21 @@ DEFAULT_GROUPS = ("benchmark", "diligent", "synthetic")
 OUTLINE_HELP = ("the rendered objects' outline: exact (default), the pixels they cover whole and "
                 "nothing else; partial, also those they cover in part, dimmed, the mask holding "
                 "those covered at least half (rendered on first use and cached apart)")
+RESOLUTION_HELP = (f"the rendered objects' captures, pixels a side (default {scenes.RESOLUTION}, at least "
+                   f"64; the light network shrinks every capture to its own 64 or 128, as "
+                   f"it does a photograph; rendered on first use and cached apart)")
 RAISED, RAISED_TWICE = 1.0, 2.0     # degrees: a stage that raised the error by more is flagged
+
+
+def resolution(text: str) -> int:
+    """``--resolution``'s value: a whole number of pixels, at least 64."""
+    try:
+        side = int(text)
+    except ValueError:
+        side = 0
+    if side < 64:
+        raise argparse.ArgumentTypeError(f"a whole number of pixels, at least 64, was expected, got {text!r}")
+    return side
 
 
 def with_room_light(subject, level: float):
@@ -100,19 +114,21 @@ def with_room_light(subject, level: float):
 
 
 def cases(groups, sets, data: Path, cache: Path, names=None, bounces: int = scenes.BOUNCES,
-          room_light: float = 0.0, outline: str = "exact"):
+          room_light: float = 0.0, outline: str = "exact", resolution: int = scenes.RESOLUTION):
     """(group, name, light set, function reading the subject) for every case asked for, the
-    rendered objects' interreflections traced to ``bounces`` (2: none) and their outline drawn as
-    ``outline`` (``scenes.OUTLINES``), with a room's light of ``room_light``
-    (:func:`with_room_light`; 0: none added)."""
-    for group, name, label, read in _cases(groups, sets, data, cache, names, bounces, outline):
+    rendered objects' interreflections traced to ``bounces`` (2: none), their outline drawn as
+    ``outline`` (``scenes.OUTLINES``) and their captures ``resolution`` pixels a side, with a
+    room's light of ``room_light`` (:func:`with_room_light`; 0: none added)."""
+    for group, name, label, read in _cases(groups, sets, data, cache, names, bounces, outline,
+                                           resolution):
         if room_light:
             yield group, name, label, lambda read=read: with_room_light(read(), room_light)
         else:
             yield group, name, label, read
 
 
-def _cases(groups, sets, data: Path, cache: Path, names, bounces: int, outline: str):
+def _cases(groups, sets, data: Path, cache: Path, names, bounces: int, outline: str,
+           resolution: int):
     for group, objects in (("benchmark", scenes.OBJECTS), ("single", scenes.SINGLE_MATERIAL),
                            ("diligent-rig", scenes.ON_DILIGENT_RIG)):
         if group not in groups:
@@ -120,7 +136,7 @@ def _cases(groups, sets, data: Path, cache: Path, names, bounces: int, outline: 
         for obj in objects:
             if names and obj.name not in names:
                 continue
-            obj = replace(obj, bounces=bounces, outline=outline)
+            obj = replace(obj, bounces=bounces, outline=outline, resolution=resolution)
             for label in sets:
                 def read(obj=obj, label=label):
                     folder = scenes.make_captures(obj, data, cache)[label]
@@ -158,6 +174,7 @@ def case_parser(description: str, groups=DEFAULT_GROUPS) -> argparse.ArgumentPar
                         help="add the light of a room to every image: this share of the captures' "
                              "99th percentile times the albedo (default 0: none)")
     parser.add_argument("--outline", choices=scenes.OUTLINES, default="exact", help=OUTLINE_HELP)
+    parser.add_argument("--resolution", type=resolution, default=scenes.RESOLUTION, help=RESOLUTION_HELP)
     return parser
 
 
@@ -184,7 +201,7 @@ def study_cases(args):
 def asked_cases(args):
     """The cases :func:`case_parser`'s parsed ``args`` ask for (:func:`cases`)."""
     return cases(args.only, args.sets, args.data, args.cache, args.names, room_light=args.room_light,
-                 outline=args.outline)
+                 outline=args.outline, resolution=args.resolution)
 
 
 def capture_options(args) -> dict:
@@ -192,7 +209,8 @@ def capture_options(args) -> dict:
     their defaults: a study claims its results folder with them, so that none mixes rows of
     captures made otherwise."""
     return ({"room_light": args.room_light} if args.room_light else {}) | \
-        ({"outline": args.outline} if args.outline != "exact" else {})
+        ({"outline": args.outline} if args.outline != "exact" else {}) | \
+        ({"resolution": args.resolution} if args.resolution != scenes.RESOLUTION else {})
 
 
 def selfcal_study(description: str, folder: str, made_with: dict, run_case, summarise, progress,
@@ -411,6 +429,7 @@ def main():
                         help="add the light of a room to every image: this share of the captures' "
                              "99th percentile times the albedo (default 0: none; with_room_light)")
     parser.add_argument("--outline", choices=scenes.OUTLINES, default="exact", help=OUTLINE_HELP)
+    parser.add_argument("--resolution", type=resolution, default=scenes.RESOLUTION, help=RESOLUTION_HELP)
     parser.add_argument("--list", action="store_true", help="print the objects as a Markdown table and stop")
     parser.add_argument("--verbose", action="store_true")
     args = parser.parse_args()
@@ -439,10 +458,7 @@ def main():
                    "weights": weights_used(args.settings)}
         if args.bounces != scenes.BOUNCES:
             claimed["bounces"] = args.bounces
-        if args.room_light:
-            claimed["room_light"] = args.room_light
-        if args.outline != "exact":
-            claimed["outline"] = args.outline
+        claimed |= capture_options(args)
         runs.claim(out, claimed)
     except (ValueError, InputError) as e:
         parser.error(str(e))
@@ -451,12 +467,13 @@ def main():
           + ("" if args.bounces == scenes.BOUNCES else f"; renders traced to {args.bounces} bounces")
           + (f"; a room's light of {args.room_light:g} added" if args.room_light else "")
           + ("" if args.outline == "exact" else f"; outlines {args.outline}")
+          + ("" if args.resolution == scenes.RESOLUTION else f"; {args.resolution} px a side")
           + f"; results in {out}")
     print(f"{'group':<9} {'case':<12} {'set':>3} {'network':>8} "
           + " ".join(f"{s:>9}" for s in stage_names) + f" {'final':>8} {'int':>6} {'time':>6}  raised")
     results = {}
     for group, name, label, read in cases(args.only, args.sets, args.data, args.cache, args.names,
-                                          args.bounces, args.room_light, args.outline):
+                                          args.bounces, args.room_light, args.outline, args.resolution):
         path = out / f"{group}-{name}-{label}.json"
         result = json.loads(path.read_text()) if path.is_file() else None
         why = None if result is None else stale(result, made_with)

@@ -42,7 +42,7 @@ import numpy as np
 import scipy.io
 import torch
 import trimesh
-from scipy.ndimage import gaussian_filter
+from scipy.ndimage import gaussian_filter, zoom
 
 from unps.data.diligent import find_diligent_object
 from unps.data.layout import DIRECTIONS, FILENAMES, INTENSITIES, MASK, NORMALS
@@ -55,7 +55,7 @@ from unps.synthetic import shapes, vessels
 from unps.synthetic.render import (FULL_COVERAGE, _scene, _traced, _write_mesh, procedural_albedo,
                                    set_variant)
 
-RESOLUTION = 128
+RESOLUTION = 128         # the captures' side in pixels, unless an object asks for another
 SPP = 16                 # a square: the stratified sampler's grid
 BOUNCES = 4              # the path tracer's longest path for the interreflections
 STAND_IN = 0.5           # albedo of the diffuse stand-in material
@@ -85,6 +85,8 @@ class BenchmarkObject:
         bounces: the path tracer's longest path for the interreflections (:data:`BOUNCES`); 2
             renders the direct light alone, cast shadows included and no interreflection.
         outline: one of :data:`OUTLINES` (module docstring).
+        resolution: the captures' side in pixels. The materials' patches and the texture are
+            drawn at :data:`RESOLUTION` and stretched to it, so that only the pixels change.
     """
 
     name: str
@@ -95,11 +97,12 @@ class BenchmarkObject:
     rig: str = "drawn"
     bounces: int = BOUNCES
     outline: str = "exact"
+    resolution: int = RESOLUTION
 
     def key(self, camera: bool = True) -> str:
         """A short hash of everything that makes its radiance (and, with ``camera``, its captures);
         the drawn rig and the exact outline, the first of each, add nothing to it."""
-        spec = {**asdict(self), "version": SCENE_VERSION, "resolution": RESOLUTION, "spp": SPP}
+        spec = {**asdict(self), "version": SCENE_VERSION, "spp": SPP}
         if self.rig == "drawn":
             del spec["rig"]
         if self.outline == "exact":               # the captures rendered before it was an option
@@ -322,11 +325,23 @@ def hemispherical_albedo(brdf, samples: int = 4096, seed: int = 0) -> np.ndarray
 
 def material_map(mask: np.ndarray, count: int, seed: int) -> np.ndarray:
     """(H, W) material index in [0, count): patches with sharp edges from a smooth random field
-    cut at its quantiles over the object, so that each material covers a similar share."""
+    (drawn at :data:`RESOLUTION`, stretched to H = W) cut at its quantiles over the object, so
+    that each material covers a similar share."""
     rng = np.random.default_rng(seed)
-    field_ = gaussian_filter(rng.standard_normal(mask.shape), mask.shape[0] * rng.uniform(0.06, 0.14))
+    field_ = gaussian_filter(rng.standard_normal((RESOLUTION, RESOLUTION)),
+                             RESOLUTION * rng.uniform(0.06, 0.14))
+    field_ = stretched(field_, mask.shape[0])
     cuts = np.quantile(field_[mask], np.arange(1, count) / count)
     return np.searchsorted(cuts, field_).astype(np.int64)
+
+
+def stretched(values: np.ndarray, side: int) -> np.ndarray:
+    """(S, S, ...) ``values`` resampled (bilinear) to (side, side, ...); themselves at S = side."""
+    if values.shape[0] == side:
+        return values
+    factor = side / values.shape[0]
+    return zoom(values, (factor, factor) + (1,) * (values.ndim - 2), order=1, grid_mode=True,
+                mode="nearest")
 
 
 def direct_light(normals: np.ndarray, brdf, directions: np.ndarray) -> np.ndarray:
@@ -356,19 +371,20 @@ def render_radiance(obj: BenchmarkObject, data: Path, rig: Rig, progress=None):
     set_variant("scalar_rgb")
     with tempfile.TemporaryDirectory() as tmp:
         path = _write_mesh(mesh, Path(tmp))
-        normals, depth, coverage = _traced(path, RESOLUTION, obj.seed)
+        normals, depth, coverage = _traced(path, obj.resolution, obj.seed)
         whole = (coverage > FULL_COVERAGE) & np.isfinite(depth)
         shown, mask, share = outline(whole, coverage, np.isfinite(depth), obj.outline)
         stand_in = {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": STAND_IN}}
         scenes = {bounces: _scene(path, stand_in, {"type": "path", "max_depth": bounces},
-                                  RESOLUTION, SPP, "stratified") for bounces in {2, obj.bounces}}
+                                  obj.resolution, SPP, "stratified") for bounces in {2, obj.bounces}}
         params = {bounces: mi.traverse(scene) for bounces, scene in scenes.items()}
         brdfs = [read_neural_brdf(data / "merl_nbrdf" / f"{name}.h5") for name in obj.materials]
         white = hemispherical_albedo(read_neural_brdf(data / "merl_nbrdf" / f"{WHITE[0]}.h5")).mean()
         units = WHITE[1] / white
         albedos = np.stack([hemispherical_albedo(b) for b in brdfs]) * units         # (k, 3)
         which = material_map(whole, len(brdfs), obj.seed)[shown]
-        texture = procedural_albedo(obj.seed, RESOLUTION, feature=0.05, contrast=0.15)[shown]
+        texture = stretched(procedural_albedo(obj.seed, RESOLUTION, feature=0.05, contrast=0.15),
+                            obj.resolution)[shown]
         receiving = np.minimum(albedos[which] * texture, 0.95)                   # (m, 3)
         mean_albedo = receiving.mean(0)
         out = {}
