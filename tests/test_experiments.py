@@ -1243,15 +1243,22 @@ def test_light_benchmark_diligent_rig_group_lights_the_same_objects_with_diligen
     assert [(group, name, label) for group, name, label, _ in found] == [("diligent-rig", "pits", "96")]
 
 
+@pytest.fixture
+def rendering_benchmark():
+    """``experiments/light_benchmark/benchmark.py`` as a module, where the MERL fits its objects
+    are painted with are at hand (skipped where not)."""
+    if not (SHARED_DATA / "merl_nbrdf").is_dir():
+        pytest.skip(f"MERL fits not found at {SHARED_DATA / 'merl_nbrdf'}")
+    return load_script("lb_benchmark", "experiments/light_benchmark/benchmark.py")
+
+
 @pytest.mark.slow
-def test_light_benchmark_renders_without_interreflections_when_traced_to_two_bounces(tmp_path, monkeypatch):
+def test_light_benchmark_renders_without_interreflections_when_traced_to_two_bounces(
+        rendering_benchmark, tmp_path, monkeypatch):
     """``--bounces 2``: a bowl's faces turned from a light get no light at all (they get its
     interreflections at the default), and the captures are cached apart while the default's keep
     their keys."""
-    data = SHARED_DATA
-    if not (data / "merl_nbrdf").is_dir():
-        pytest.skip(f"MERL fits not found at {data / 'merl_nbrdf'}")
-    benchmark = load_script("lb_benchmark", "experiments/light_benchmark/benchmark.py")
+    data, benchmark = SHARED_DATA, rendering_benchmark
     scenes = benchmark.scenes
     bowl = next(obj for obj in scenes.OBJECTS if obj.name == "bowl-a")
     direct_only = dataclasses.replace(bowl, bounces=2)
@@ -1276,14 +1283,12 @@ def test_light_benchmark_renders_without_interreflections_when_traced_to_two_bou
 
 
 @pytest.mark.slow
-def test_light_benchmark_partial_outline_adds_the_pixels_an_object_covers_in_part(tmp_path, monkeypatch):
+def test_light_benchmark_partial_outline_adds_the_pixels_an_object_covers_in_part(
+        rendering_benchmark, tmp_path, monkeypatch):
     """``--outline partial``: the pixels the object covers whole are rendered as the exact
     outline renders them; the ones it covers in part are added, dimmer than the whole ones beside
     them, and masked where it covers at least half; cached apart, the exact outline's keys kept."""
-    data = SHARED_DATA
-    if not (data / "merl_nbrdf").is_dir():
-        pytest.skip(f"MERL fits not found at {data / 'merl_nbrdf'}")
-    benchmark = load_script("lb_benchmark", "experiments/light_benchmark/benchmark.py")
+    data, benchmark = SHARED_DATA, rendering_benchmark
     scenes = benchmark.scenes
     blob = scenes.OBJECTS[0]
     partial = dataclasses.replace(blob, outline="partial")
@@ -1313,14 +1318,11 @@ def test_light_benchmark_partial_outline_adds_the_pixels_an_object_covers_in_par
 
 
 @pytest.mark.slow
-def test_light_benchmark_renders_the_same_object_at_another_resolution():
+def test_light_benchmark_renders_the_same_object_at_another_resolution(rendering_benchmark):
     """``--resolution``: the object at another size is the same object — its patches of material
     and its texture stretched, not drawn again — so that its image at half the size is its image
     at the default shrunk; cached apart, the default's keys kept."""
-    data = SHARED_DATA
-    if not (data / "merl_nbrdf").is_dir():
-        pytest.skip(f"MERL fits not found at {data / 'merl_nbrdf'}")
-    benchmark = load_script("lb_benchmark", "experiments/light_benchmark/benchmark.py")
+    data, benchmark = SHARED_DATA, rendering_benchmark
     scenes = benchmark.scenes
     blob = scenes.OBJECTS[0]
     half = dataclasses.replace(blob, resolution=scenes.RESOLUTION // 2)
