@@ -40,7 +40,7 @@ from unps.solvers.rpca import robust_init
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import runs  # noqa: E402
 from albedo_entropy import bas_relief  # noqa: E402
-from benchmark import light_source, study_cases, study_parser  # noqa: E402
+from benchmark import capture_options, light_source, study_cases, study_parser  # noqa: E402
 
 SCALES = (0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.12, 1.25, 1.4, 1.6, 1.8, 2.0)
 
@@ -184,7 +184,7 @@ def main() -> None:
     try:
         runs.claim(out, {"study": "bas_relief_left", "scales": args.scales,
                          "room_light": args.room_light, "weights": runs.weights_digest(None),
-                         **({"outline": args.outline} if args.outline != "exact" else {})})
+                         **capture_options(args)})
     except ValueError as e:
         parser.error(str(e))
     network, _ = light_source([], [])

@@ -52,7 +52,7 @@ from unps.lightnet.brdf import read_neural_brdf
 from unps.lightnet.materials import HELD_OUT_MERL
 from unps.lightnet.rig import cap_lights, dome_lights, ring_lights
 from unps.synthetic import shapes, vessels
-from unps.synthetic.render import (FULL_COVERAGE, _scene, _traced, _write_mesh, procedural_albedo,
+from unps.synthetic.render import (_scene, _traced, _write_mesh, covered_whole, procedural_albedo,
                                    set_variant)
 
 RESOLUTION = 128         # the captures' side in pixels, unless an object asks for another
@@ -372,7 +372,7 @@ def render_radiance(obj: BenchmarkObject, data: Path, rig: Rig, progress=None):
     with tempfile.TemporaryDirectory() as tmp:
         path = _write_mesh(mesh, Path(tmp))
         normals, depth, coverage = _traced(path, obj.resolution, obj.seed)
-        whole = (coverage > FULL_COVERAGE) & np.isfinite(depth)
+        whole = covered_whole(coverage, depth)
         shown, mask, share = outline(whole, coverage, np.isfinite(depth), obj.outline)
         stand_in = {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": STAND_IN}}
         scenes = {bounces: _scene(path, stand_in, {"type": "path", "max_depth": bounces},

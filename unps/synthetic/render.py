@@ -188,9 +188,15 @@ def _write_mesh(mesh: Mesh, folder: Path) -> Path:
 def _ground_truth(mesh_file: Path, resolution: int, seed: int
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     normals, depth, coverage = _traced(mesh_file, resolution, seed)
-    mask = (coverage > FULL_COVERAGE) & np.isfinite(depth)
+    mask = covered_whole(coverage, depth)
     normals[~mask] = 0
     return normals, np.where(mask, depth, np.nan).astype(np.float32), mask
+
+
+def covered_whole(coverage: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the pixels the object covers whole (:data:`FULL_COVERAGE` of their samples)
+    with a finite depth, from :func:`_traced`'s (H, W) ``coverage`` and ``depth``."""
+    return (coverage > FULL_COVERAGE) & np.isfinite(depth)
 
 
 def _traced(mesh_file: Path, resolution: int, seed: int
