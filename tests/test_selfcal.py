@@ -16,7 +16,7 @@ from unps.lights.factorization import normals_under
 from unps.lights.reversal import HALF_TURN
 from unps.lights.model import MIN_EXPONENT, DepthPyramid, SelfCalibrationModel, SpecularLobes, normals_from_depth
 from unps.lights.selfcal import (AS_READ_MARGIN, HALF_TURN_MARGIN, SelfCalibration, half_turn_kept,
-                                 self_calibrate, unsure_reading)
+                                 material_labels, self_calibrate, unsure_reading)
 from unps.metrics import angular_error
 
 QUICK = SelfCalibration(steps=600, max_pixels=1200)
@@ -93,6 +93,49 @@ def test_the_specular_lobes_and_their_gradient_are_autograds_own():
     torch.testing.assert_close(lobes, plain, rtol=1e-12, atol=0)
     for found, wanted in zip(torch.autograd.grad(lobes, (cosine, weights), upstream), expected):
         torch.testing.assert_close(found, wanted, rtol=1e-12, atol=1e-22)
+
+
+def test_lobes_weighted_pixel_by_pixel_are_autograds_own_and_the_shared_weights_repeated():
+    torch.manual_seed(1)
+    sharpness = torch.tensor([10.0, 30.0, 100.0, 300.0], dtype=torch.float64)
+    cosine = (1 - 0.3 * torch.rand(30, 7, dtype=torch.float64)).requires_grad_()
+    weights = torch.rand(30, 4, dtype=torch.float64).requires_grad_()
+    assert torch.autograd.gradcheck(SpecularLobes.apply, (cosine, weights, sharpness))
+    plain = torch.einsum("mk,kmn->mn", weights,
+                         torch.exp((sharpness[:, None, None] * (cosine - 1)).clamp_min(MIN_EXPONENT)))
+    torch.testing.assert_close(SpecularLobes.apply(cosine, weights, sharpness), plain, rtol=1e-12, atol=0)
+    shared = weights[0].detach()
+    torch.testing.assert_close(SpecularLobes.apply(cosine, shared.expand(30, 4), sharpness),
+                               SpecularLobes.apply(cosine, shared, sharpness), rtol=1e-12, atol=0)
+
+
+def test_materials_are_told_apart_by_colour_and_grey_images_are_one(glossy):
+    """The glossy sphere's two halves (warm and cool albedo) are two materials whatever the
+    shading; a grey stack is one."""
+    target = torch.as_tensor(glossy.images[:, glossy.mask]).permute(1, 0, 2)
+    labels = material_labels(target, 2).numpy()
+    left = np.mgrid[0:48, 0:48][1][glossy.mask] < 24
+    assert {tuple(np.unique(labels[left])), tuple(np.unique(labels[~left]))} == {(0,), (1,)}
+    grey = target.mean(-1, keepdim=True).expand_as(target)
+    assert material_labels(grey, 2).unique().tolist() == [0]
+    assert material_labels(target, 1).unique().tolist() == [0]
+
+
+def test_each_material_renders_its_own_lobes():
+    torch.manual_seed(2)
+    depth, mask = torch.randn(6, 8) * 0.3, torch.ones(6, 8, dtype=torch.bool)
+    lights = torch.nn.functional.normalize(torch.tensor([[0.3, 0.1, 1.0], [-0.4, 0.2, 1.0]]), dim=-1)
+    materials = (torch.arange(48) % 3 == 0).long()
+    two = SelfCalibrationModel(lights, depth, mask, torch.full((48, 3), 0.4), (10.0, 100.0), 1, materials)
+    with torch.no_grad():
+        two.lobe_logits.copy_(torch.tensor([[-20.0, -20.0], [0.5, 1.0]]))   # material 0 nearly matte
+    one = SelfCalibrationModel(lights, depth, mask, torch.full((48, 3), 0.4), (10.0, 100.0), 1)
+    for j in (0, 1):
+        with torch.no_grad():
+            one.lobe_logits.copy_(two.lobe_logits[j:j + 1])
+        at = materials == j
+        torch.testing.assert_close(two()[at], one()[at])
+    assert two.lobes().shape == (2, 2) and one.lobes().shape == (1, 2)
 
 
 def test_the_surface_under_the_true_lights_is_the_true_one():
@@ -400,6 +443,9 @@ def test_self_calibration_refuses_stacks_it_cannot_use(glossy):
     for every in (-1, 2.5):
         with pytest.raises(InputError, match=f"shadows_every must be a whole number .*got {every}"):
             self_calibrate(glossy, rotated(glossy, 5), SelfCalibration(shadows_every=every))
+    for materials in (0, 1.5, True):
+        with pytest.raises(InputError, match=f"light.selfcal.materials must be a whole number >= 1.*got {materials!r}"):
+            self_calibrate(glossy, rotated(glossy, 5), SelfCalibration(materials=materials))
 
 
 def test_light_selfcal_in_a_fit_logs_each_stage_and_draws_the_lights(tmp_path, caplog):

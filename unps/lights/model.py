@@ -2,14 +2,15 @@
 
 Every pixel p of the working grid under image i is rendered as
 
-    X̃_ip = V_ip · e_i · max(n_p·l_i, 0) · (ρ_p + Σ_k w_k · exp(κ_k (n_p·h_i − 1)))
+    X̃_ip = V_ip · e_i · max(n_p·l_i, 0) · (ρ_p + Σ_k w_jk · exp(κ_k (n_p·h_i − 1))),  j = j(p)
 
 with V_ip 0 where the depth map casts a shadow on p from light i and 1 elsewhere
 (:meth:`SelfCalibrationModel.visibility`), n_p the normal of a depth map (so the normals are
 integrable), ρ_p an RGB diffuse albedo,
-w_k ≥ 0 the weights of K spherical-Gaussian specular lobes of fixed sharpness κ_k shared by the
-whole object, h_i the half vector between l_i and the view v = (0, 0, 1) (orthographic), and
-(l_i, e_i) the direction and intensity of light i.
+w_jk ≥ 0 the weights of K spherical-Gaussian specular lobes of fixed sharpness κ_k, shared by the
+pixels of one material j (the object's pixels are split into a few materials by colour before the
+fit, :func:`unps.lights.selfcal.material_labels`), h_i the half vector between l_i and the view
+v = (0, 0, 1) (orthographic), and (l_i, e_i) the direction and intensity of light i.
 
 The lights are parameterised around a first guess s̃_i (the light network's directions; the
 images are divided by its intensities): s_i = (s̃_i + ε_i)·A, l_i = s_i / |s_i|, e_i = |s_i|
@@ -68,7 +69,8 @@ def _mean_slope(z: torch.Tensor, on: torch.Tensor) -> torch.Tensor:
 
 
 class SpecularLobes(torch.autograd.Function):
-    """Σ_k w_k · exp(max(κ_k (c − 1), ``MIN_EXPONENT``)) with its gradient written out.
+    """Σ_k w_k · exp(max(κ_k (c − 1), ``MIN_EXPONENT``)) with its gradient written out; the
+    weights shared by every pixel, or one set per pixel.
 
     One tensor of K·m·n exponentials is made in the forward pass, in place, and reused by the
     backward; built from torch's own operations the sum made about eight such tensors a step
@@ -78,7 +80,7 @@ class SpecularLobes(torch.autograd.Function):
 
     Args (of ``apply``):
         cosine: (m, n) n·h ≤ 1.
-        weights: (K,) w_k ≥ 0.
+        weights: (K,) w_k ≥ 0, or (m, K): pixel p's own.
         sharpness: (K,) κ_k, constant.
 
     Returns:
@@ -89,14 +91,24 @@ class SpecularLobes(torch.autograd.Function):
     def forward(ctx, cosine: torch.Tensor, weights: torch.Tensor, sharpness: torch.Tensor) -> torch.Tensor:
         lobes = torch.mul(sharpness[:, None, None], cosine - 1).clamp_(min=MIN_EXPONENT).exp_()
         ctx.save_for_backward(lobes, weights, sharpness)
-        return torch.tensordot(weights, lobes, 1)
+        if weights.dim() == 1:
+            return torch.tensordot(weights, lobes, 1)
+        total = torch.zeros_like(cosine)
+        for k, lobe in enumerate(lobes):
+            total.addcmul_(weights[:, k, None], lobe)
+        return total
 
     @staticmethod
     def backward(ctx, grad: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, None]:
         lobes, weights, sharpness = ctx.saved_tensors
-        flat = lobes.reshape(len(weights), -1)
-        d_cosine = ((weights * sharpness) @ flat).view_as(grad).mul_(grad)
-        return d_cosine, flat @ grad.reshape(-1), None
+        if weights.dim() == 1:
+            flat = lobes.reshape(len(weights), -1)
+            d_cosine = ((weights * sharpness) @ flat).view_as(grad).mul_(grad)
+            return d_cosine, flat @ grad.reshape(-1), None
+        d_cosine = torch.zeros_like(grad)
+        for k, lobe in enumerate(lobes):
+            d_cosine.addcmul_((weights[:, k] * sharpness[k])[:, None], lobe)
+        return d_cosine.mul_(grad), torch.einsum("kmn,mn->mk", lobes, grad), None
 
 
 class DepthPyramid(nn.Module):
@@ -133,10 +145,13 @@ class SelfCalibrationModel(nn.Module):
         depth: (H, W) starting depth; mask: (H, W) bool with m object pixels.
         albedo: (m, 3) starting RGB albedo (> 0).
         sharpness: the lobes' κ_k.
+        materials: (m,) each pixel's material j, 0 … J − 1, each with its own lobe weights;
+            None: one material.
     """
 
     def __init__(self, scaled_lights: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor,
-                 albedo: torch.Tensor, sharpness: tuple[float, ...], levels: int = 4):
+                 albedo: torch.Tensor, sharpness: tuple[float, ...], levels: int = 4,
+                 materials: torch.Tensor | None = None):
         super().__init__()
         self.register_buffer("scaled_lights", scaled_lights.float())
         self.register_buffer("mask", mask)
@@ -147,7 +162,11 @@ class SelfCalibrationModel(nn.Module):
         self.gbr = nn.Parameter(torch.tensor([0.0, 0.0, 1.0]))            # μ, ν, λ
         self.light_residual = nn.Parameter(torch.zeros_like(self.scaled_lights))
         self.log_albedo = nn.Parameter(albedo.clamp_min(1e-6).log())
-        self.lobe_logits = nn.Parameter(torch.full((len(sharpness),), -5.0))
+        if materials is None:
+            materials = torch.zeros(len(albedo), dtype=torch.long)
+        self.register_buffer("materials", materials.long())
+        count = int(materials.max()) + 1 if len(materials) else 1
+        self.lobe_logits = nn.Parameter(torch.full((count, len(sharpness)), -5.0))
         self.log_tint = nn.Parameter(torch.zeros_like(self.scaled_lights))
 
     def frame(self) -> torch.Tensor:
@@ -175,7 +194,7 @@ class SelfCalibrationModel(nn.Module):
         return normals_from_depth(self.depth(), self.mask)
 
     def lobes(self) -> torch.Tensor:
-        """(K,) the lobes' weights w_k ≥ 0."""
+        """(J, K) the lobes' weights w_jk ≥ 0 of each of the J materials."""
         return F.softplus(self.lobe_logits)
 
     @torch.no_grad()
@@ -195,7 +214,9 @@ class SelfCalibrationModel(nn.Module):
         shading = (normals @ directions.T).clamp_min(0)                                    # (m, n)
         halfway = F.normalize(directions + self.view, dim=-1)
         cosine = (normals @ halfway.T).clamp(max=1)
-        specular = SpecularLobes.apply(cosine, self.lobes(), self.sharpness)
+        lobes = self.lobes()
+        weights = lobes[0] if len(lobes) == 1 else lobes[self.materials]
+        specular = SpecularLobes.apply(cosine, weights, self.sharpness)
         radiance = self.log_albedo.exp()[:, None, :] + specular[..., None]
         if visible is not None:
             shading = shading * visible
