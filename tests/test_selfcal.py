@@ -149,6 +149,7 @@ def test_without_the_pull_the_images_undo_a_15_degree_rotation_of_the_lights(glo
     start = rotated(glossy, 15)
     found, verdict = self_calibrate(glossy, start, ROTATION_RECOVERY)
     assert verdict.outcome == "changed"
+    assert verdict.evidence["materials"] == 2                  # its warm and its cool half
     before, after = light_errors(start, glossy)["light_dir_mae"], light_errors(found, glossy)
     assert before > 12 and after["light_dir_mae"] < 1.0, after
     assert after["light_int_err"] < 0.03

@@ -329,7 +329,7 @@ def fit_once(images: WorkingImages, lights: Lights, settings: SelfCalibration,
     moved = float(angular_error(directions, lights.directions).mean())
     flattened = flattening(directions, lights.directions)
     evidence = {"loss": loss, "prior": pull, "moved_deg": moved, "flattened_deg": flattened,
-                "steps": steps}
+                "steps": steps, "materials": len(model.lobe_logits)}
     if weight is not None:
         evidence["black_share"] = float(1 - weight.mean())
     log.info("self-calibrated %d lights on %d pixels in %d steps (%.1f s): loss %.4g, pull toward "
