@@ -234,7 +234,7 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
     materials = settings.materials
     if isinstance(materials, bool) or not isinstance(materials, int) or materials < 1:
         raise InputError(f"light.selfcal.materials must be a whole number >= 1 (1: one set of specular "
-                         f"lobes for the whole object), got {settings.materials!r}")
+                         f"lobes for the whole object), got {materials!r}")
     if settings.shadows_every < 0 or int(settings.shadows_every) != settings.shadows_every:
         raise InputError(f"light.selfcal.shadows_every must be a whole number of steps >= 0 (0: no "
                          f"cast shadows), got {settings.shadows_every}")
