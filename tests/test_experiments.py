@@ -1441,6 +1441,48 @@ def test_turn_share_finds_each_transform_it_is_made_of():
     assert left["as is"] > 2.0 and left["bas-relief"] < 0.01 and left["shear"] > 0.5
 
 
+def test_frame_landscape_fits_from_each_frame_and_the_truth_and_reads_which_ends_lowest():
+    """On a Lambertian sphere under 12 lights: the held fit from the eleven frames and from the
+    truth, the free fit from the network and the truth; the summary reads each fit's error off its
+    directions, picks the frame whose fit ends lowest, and finds the true frame's fit lower and
+    nearer the truth than the network's."""
+    from unps.lights.selfcal import SelfCalibration
+    from unps.metrics import angular_error
+
+    study = load_script("lb_frame_landscape", "experiments/light_benchmark/frame_landscape.py")
+    subject = render_lambertian(shape="sphere", size=32, n_lights=12, seed=2)
+    result = study.run_case(subject, SelfCalibration(device="cpu", steps=100, **study.HELD))
+    assert len(result["fits"]) == 11 + 3
+    row = study.summarise(result)
+    held = f"held from {study.START}"
+    truth = np.asarray(result["truth"])
+    assert row["error"][held] == pytest.approx(
+        angular_error(np.asarray(result["fits"][held]["directions"]), truth).mean())
+    searched = [k for k in row["loss"] if k.startswith("held from") and k != "held from truth"]
+    assert len(searched) == 11 and row["loss"][row["lowest"]] == min(row["loss"][k] for k in searched)
+    assert row["loss"]["held from truth"] < row["loss"][held]
+    assert row["error"]["held from truth"] < row["start"] and row["moved"] > 0
+    text = study.report({("benchmark", "sphere", "12"): row})
+    assert text.splitlines()[1].split()[:3] == ["benchmark", "sphere", "12"] and "1 cases" in text
+
+
+def test_network_on_render_reads_the_held_fits_own_render_and_undoes_the_transform():
+    """On a Lambertian sphere under 12 lights the network reads the held fit's render of itself
+    within a few degrees of the held lights; each way of undoing its transform is scored, and the
+    report's summary line counts the case."""
+    from unps.lights.selfcal import SelfCalibration
+
+    study = load_script("lb_network_on_render", "experiments/light_benchmark/network_on_render.py")
+    subject = render_lambertian(shape="sphere", size=32, n_lights=12, seed=2)
+    result = study.run_case(subject, SelfCalibration(device="cpu", steps=100))
+    held = np.asarray(result["held"])
+    assert held.shape == (12, 3) and np.allclose(np.linalg.norm(held, axis=1), 1, atol=1e-5)
+    row = study.summarise(result)
+    assert set(row) == {"start", "held", "read off", *study.UNDONE}
+    assert 0 < row["read off"] < 5 and row["held"] < row["start"]
+    assert study.report({("benchmark", "sphere", "12"): row}).splitlines()[-1].split()[:3] == ["benchmark", "12", "1"]
+
+
 def test_large_capture_writes_the_ball_enlarged_unclipped_with_its_lights(tmp_path, capsys):
     """Four of ball's images at their own size: four 16-bit PNGs whose brightest value is the top
     level, the chosen lights beside them, read back as a user's folder is; bad arguments refused."""
