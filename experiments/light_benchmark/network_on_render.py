@@ -27,6 +27,7 @@ import numpy as np
 import torch
 from scipy.spatial.transform import Rotation
 
+from unps.inverse.fit import unit
 from unps.lightnet.estimate import network_lights
 from unps.lights.reversal import ReversalTest
 from unps.lights.selfcal import fit, frame_held, initial_model, working_images
@@ -39,25 +40,21 @@ import scenes  # noqa: E402
 UNDONE = ("linear", "half", "rotation")
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
-
-
 def undone(held: np.ndarray, read: np.ndarray) -> dict[str, np.ndarray]:
     """(n, 3) ``held`` directions with the transform that carries them onto the network's
     reading ``read`` (n, 3) of their render undone, by :data:`UNDONE`'s ways.
 
     >>> turn = Rotation.from_euler("x", 10, degrees=True).as_matrix()
-    >>> held = _unit(np.array([[0.3, 0.1, 0.9], [-0.4, 0.2, 0.8], [0.1, -0.5, 0.8], [0.0, 0.0, 1.0]]))
+    >>> held = unit(np.array([[0.3, 0.1, 0.9], [-0.4, 0.2, 0.8], [0.1, -0.5, 0.8], [0.0, 0.0, 1.0]]))
     >>> back = undone(held @ turn, held @ turn @ turn)
     >>> [round(float(angular_error(back[k], held).max()), 4) for k in ("linear", "rotation")]
     [0.0, 0.0]
     """
     linear = np.linalg.lstsq(held, read, rcond=None)[0]            # held @ linear ≈ read
     rotation = Rotation.align_vectors(read, held)[0].as_matrix().T  # held @ rotation ≈ read
-    return {"linear": _unit(held @ np.linalg.inv(linear)),
-            "half": _unit(held @ np.linalg.inv((linear + np.eye(3)) / 2)),
-            "rotation": _unit(held @ rotation.T)}
+    return {"linear": unit(held @ np.linalg.inv(linear)),
+            "half": unit(held @ np.linalg.inv((linear + np.eye(3)) / 2)),
+            "rotation": unit(held @ rotation.T)}
 
 
 def render_of(images, model):
