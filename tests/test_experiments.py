@@ -1654,3 +1654,29 @@ def test_mask_outline_study_reads_four_masks_and_the_networks_lights_under_each(
     assert all(0 <= row[f"net_{k}"] < 30 for k in study.NETWORK_MASKS) and np.isnan(row["final_true"])
     assert result["missed"]["auto"] == int((true & ~found["auto"]).sum())
     assert "auto mask off by" in study.report({("diligent", "sphere", "12"): row})
+
+
+def test_flattening_read_fits_each_reading_and_reads_its_flattening_both_ways():
+    """A turn about the view axis flattens the lights as the rule reads it and not as zenith
+    angles; on a Lambertian sphere under 12 lights the held fit runs from the reading as read,
+    never declined, and the report counts it under each reading of the flattening."""
+    from scipy.spatial.transform import Rotation
+
+    from unps.lights.selfcal import SelfCalibration, flattening
+
+    study = load_script("lb_flattening_read", "experiments/light_benchmark/flattening_read.py")
+    guess = render_lambertian(shape="sphere", size=16, n_lights=12, seed=2).light_directions.astype(np.float64)
+    turned = guess @ Rotation.from_euler("z", 20, degrees=True).as_matrix().T
+    assert flattening(turned, guess) > 0.5 and abs(study.zenith_flattening(turned, guess)) < 1e-9
+    subject = render_lambertian(shape="sphere", size=32, n_lights=12, seed=2)
+    result = study.run_case(subject, SelfCalibration(device="cpu", steps=100))
+    assert list(result["fits"]) == ["as read"]
+    fit = np.asarray(result["fits"]["as read"]["fit"])
+    assert fit.shape == (12, 3) and np.allclose(np.linalg.norm(fit, axis=1), 1, atol=1e-5)
+    row = study.summarise(result)["as read"]
+    assert row["zenith"] == pytest.approx(study.zenith_flattening(fit, np.asarray(result["fits"]["as read"]["start"])))
+    assert 0 < row["true zenith"] < 90 and row["moved"] > 0
+    text = study.report({("benchmark", "sphere", "12"): {"as read": row}})
+    assert text.splitlines()[1].split()[:4] == ["benchmark", "sphere", "12", "as"]
+    counted = [line.split() for line in text.splitlines() if line.startswith(("slant", "zenith"))]
+    assert len(counted) == 4 and sum(int(c[2]) for c in counted) == 2
