@@ -1668,6 +1668,10 @@ def test_flattening_read_fits_each_reading_and_reads_its_flattening_both_ways():
     guess = render_lambertian(shape="sphere", size=16, n_lights=12, seed=2).light_directions.astype(np.float64)
     turned = guess @ Rotation.from_euler("z", 20, degrees=True).as_matrix().T
     assert flattening(turned, guess) > 0.5 and abs(study.zenith_flattening(turned, guess)) < 1e-9
+    near = np.array([[np.sin(np.radians(2)), 0.0, np.cos(np.radians(2))]])      # 2° out, carried across
+    across = np.array([[-np.sin(np.radians(8)), 0.0, np.cos(np.radians(8))]])   # the axis to 8° out
+    assert study.zenith_flattening(across, near) == pytest.approx(-6.0)
+    assert flattening(across, near) == pytest.approx(10.0)
     subject = render_lambertian(shape="sphere", size=32, n_lights=12, seed=2)
     result = study.run_case(subject, SelfCalibration(device="cpu", steps=100))
     assert list(result["fits"]) == ["as read"]
