@@ -147,11 +147,12 @@ class SelfCalibrationModel(nn.Module):
         sharpness: the lobes' κ_k.
         materials: (m,) each pixel's material j, 0 … J − 1, each with its own lobe weights;
             None: one material.
+        lobes: (J, K) starting lobe weights w_jk > 0; None: every one e⁻⁵ (nearly off).
     """
 
     def __init__(self, scaled_lights: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor,
                  albedo: torch.Tensor, sharpness: tuple[float, ...], levels: int = 4,
-                 materials: torch.Tensor | None = None):
+                 materials: torch.Tensor | None = None, lobes: torch.Tensor | None = None):
         super().__init__()
         self.register_buffer("scaled_lights", scaled_lights.float())
         self.register_buffer("mask", mask)
@@ -166,7 +167,9 @@ class SelfCalibrationModel(nn.Module):
             materials = torch.zeros(len(albedo), dtype=torch.long)
         self.register_buffer("materials", materials.long())
         count = int(materials.max()) + 1 if len(materials) else 1
-        self.lobe_logits = nn.Parameter(torch.full((count, len(sharpness)), -5.0))
+        logits = torch.full((count, len(sharpness)), -5.0) if lobes is None else \
+            torch.special.expm1(lobes.double()).log().float()          # softplus⁻¹
+        self.lobe_logits = nn.Parameter(logits)
         self.log_tint = nn.Parameter(torch.zeros_like(self.scaled_lights))
 
     def frame(self) -> torch.Tensor:

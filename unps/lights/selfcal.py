@@ -46,6 +46,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 from scipy.cluster.vq import kmeans2
+from scipy.optimize import nnls
 
 from unps.data.checks import black_everywhere, zero_ceiling
 from unps.data.lights import Verdict
@@ -55,7 +56,7 @@ from unps.errors import InputError
 from unps.geometry import integrate_normals
 from unps.lights import Lights, with_lights
 from unps.lights.factorization import normals_under
-from unps.lights.model import SelfCalibrationModel, normals_from_depth
+from unps.lights.model import MIN_EXPONENT, VIEW, SelfCalibrationModel, normals_from_depth
 from unps.lights.prior import NetworkPrior, network_prior
 from unps.lights.reversal import half_turned
 from unps.metrics import angular_error, light_slant_bias
@@ -63,7 +64,7 @@ from unps.metrics import angular_error, light_slant_bias
 log = logging.getLogger(__name__)
 
 MIN_IMAGES = 4
-MIN_START_ALBEDO = 1e-3   # a material black under the first guess (the images: 99th percentile 1)
+MIN_START_REFLECTANCE = 1e-3   # the start's albedo and lobe weights at least (images: 99th pct 1)
 MOVED_WARNING = 5.0  # degrees, mean over the lights: the images and the network disagree
 CHECK_EVERY = 100    # steps between reads of the loss (on a GPU each read waits for the device)
 AS_READ_MARGIN = 0.05    # under a warning, the half turn is kept unless its fit ends this share above
@@ -536,19 +537,20 @@ def black_ceiling(subject: Subject, lights: Lights, white: float) -> torch.Tenso
 
 def initial_model(grid: Subject, target: torch.Tensor, scaled_lights: np.ndarray,
                   settings: SelfCalibration) -> SelfCalibrationModel:
-    """The model at its start: depth integrated from the grid's normals, one albedo per material
-    (:func:`uniform_albedo`: the level and colour that render the images best under the first
-    guess), lobes nearly off.
+    """The model at its start: depth integrated from the grid's normals, one albedo and one set of
+    lobe weights per material, those that render the images best under the first guess
+    (:func:`start_reflectance`).
 
     A uniform start lets shading, not albedo, explain the images first; a start at the per-pixel
     least-squares albedo, which has absorbed the first guess's errors, settles nearly flat
     subjects (Tablet2) around those errors (``experiments/self_calibration/README.md``). Started
-    at one grey for every object (0.6 until 2026-12-07), the albedo spent the first steps
-    reaching the object's own level and colour, one step of the learning rate at a time, while
-    the lights bent to make up the difference: on the light benchmark the level and colour of
-    each material at the start took the final lights from 5.40 / 6.93 / 8.08° to 5.38 / 6.74 /
-    7.81° under 96 / 20 / 12 lights, in a fifth fewer steps, DiLiGenT's three within 0.04°
-    (``experiments/light_benchmark/README.md``, "The albedo's start").
+    at one grey for every object with the lobes nearly off (until 2026-12-07), the fit spent its
+    first steps bringing the albedo to the object's own level and colour and the lobes to its
+    gloss, one step of the learning rate at a time, while the lights bent to make up the
+    difference: on the light benchmark each material's own start took the final lights from
+    5.40 / 6.93 / 8.08° to 5.24 / 6.64 / 7.77° under 96 / 20 / 12 lights in a sixth fewer steps,
+    DiLiGenT's three within 0.04° (``experiments/light_benchmark/README.md``, "The reflectance's
+    start").
 
     Args:
         grid: working grid whose ``normals`` are those under the first guess.
@@ -560,32 +562,71 @@ def initial_model(grid: Subject, target: torch.Tensor, scaled_lights: np.ndarray
     mask = torch.as_tensor(grid.mask)
     lights = torch.as_tensor(scaled_lights).float()
     materials = material_labels(target, settings.materials)
-    shading = (normals_from_depth(depth.float(), mask) @ F.normalize(lights, dim=-1).T).clamp_min(0)
-    return SelfCalibrationModel(lights, depth, mask, uniform_albedo(target, shading, materials),
-                                tuple(settings.sharpness), settings.levels, materials)
+    sharpness = tuple(settings.sharpness)
+    normals = normals_from_depth(depth.float(), mask)
+    directions = F.normalize(lights, dim=-1)
+    halfway = F.normalize(directions + torch.tensor(VIEW), dim=-1)
+    albedo, lobes = start_reflectance(target, (normals @ directions.T).clamp_min(0),
+                                      (normals @ halfway.T).clamp(max=1), materials, sharpness)
+    return SelfCalibrationModel(lights, depth, mask, albedo, sharpness, settings.levels, materials, lobes)
 
 
-def uniform_albedo(target: torch.Tensor, shading: torch.Tensor, materials: torch.Tensor) -> torch.Tensor:
-    """(m, 3) each pixel's material's one RGB albedo ρ_j that renders the images best as
-    ρ_j · shading, in least squares over the material's pixels and every image, channel by
-    channel; at least :data:`MIN_START_ALBEDO`.
+def start_reflectance(target: torch.Tensor, shading: torch.Tensor, cosine: torch.Tensor,
+                      materials: torch.Tensor, sharpness: tuple[float, ...]
+                      ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Each material's one RGB albedo ρ_j and white lobe weights w_jk ≥ 0 that render the images
+    best as shading · (ρ_j + Σ_k w_jk exp(κ_k (cosine − 1))), in non-negative least squares
+    over the material's pixels, every image and the three channels; each at least
+    :data:`MIN_START_REFLECTANCE`.
 
     Args:
         target: (m, n, 3) the images at the object pixels.
         shading: (m, n) max(n_p · l_i, 0) under the lights.
+        cosine: (m, n) n_p · h_i, h_i the half vector of light i and the view.
         materials: (m,) each pixel's material, 0 … J − 1.
+        sharpness: the lobes' κ_k (K of them).
 
-    >>> shading = torch.rand(4, 5)
-    >>> albedo = torch.tensor([[0.5, 0.4, 0.3], [0.5, 0.4, 0.3], [0.2, 0.2, 0.9], [0.2, 0.2, 0.9]])
-    >>> uniform_albedo(albedo[:, None, :] * shading[..., None], shading, torch.tensor([0, 0, 1, 1]))[1:3]
-    tensor([[0.5000, 0.4000, 0.3000],
-            [0.2000, 0.2000, 0.9000]])
+    Returns:
+        (m, 3) each pixel's material's albedo and (J, K) the lobes' weights.
+
+    >>> shading, cosine = torch.rand(6, 40), 1 - torch.rand(6, 40) ** 2 / 4
+    >>> lobe = torch.exp(30 * (cosine - 1))
+    >>> albedo = torch.tensor([[0.5, 0.4, 0.3]] * 3 + [[0.2, 0.2, 0.9]] * 3)
+    >>> gloss = torch.tensor([0.0] * 3 + [0.6] * 3)[:, None, None]
+    >>> images = shading[..., None] * (albedo[:, None, :] + gloss * lobe[..., None])
+    >>> start, lobes = start_reflectance(images, shading, cosine, torch.tensor([0] * 3 + [1] * 3), (30.0,))
+    >>> start[2:4], lobes
+    (tensor([[0.5000, 0.4000, 0.3000],
+            [0.2000, 0.2000, 0.9000]]), tensor([[0.0010],
+            [0.6000]]))
     """
     count = int(materials.max()) + 1 if len(materials) else 1
-    products = torch.zeros(count, 3).index_add_(0, materials, (target.float() * shading[..., None]).sum(1))
-    squares = torch.zeros(count).index_add_(0, materials, shading.float().square().sum(1))
-    albedo = products / squares.clamp_min(torch.finfo(torch.float32).tiny)[:, None]
-    return albedo.clamp_min(MIN_START_ALBEDO)[materials]
+    kappa = torch.tensor(sharpness, dtype=torch.float64)[:, None, None]
+    albedo, lobes = np.empty((count, 3)), np.empty((count, len(sharpness)))
+    for j in range(count):
+        on = materials == j
+        s, t = shading[on].double(), target[on].double()                      # (mj, n), (mj, n, 3)
+        g = (kappa * (cosine[on].double() - 1)).clamp_min(MIN_EXPONENT).exp() * s          # (K, mj, n)
+        parts = torch.cat([s[None], g])                                                    # (1 + K, mj, n)
+        gram = torch.einsum("kmn,lmn->kl", parts, parts)
+        products = torch.einsum("kmn,mnc->kc", parts, t)                                   # (1 + K, 3)
+        normal = torch.block_diag(*[gram[:1, :1]] * 3)      # unknowns: ρ_r, ρ_g, ρ_b, w_1 … w_K
+        normal = torch.cat([torch.cat([normal, gram[:1, 1:].repeat(3, 1)], 1),
+                            torch.cat([gram[1:, :1].repeat(1, 3), 3 * gram[1:, 1:]], 1)])
+        right = torch.cat([products[0], products[1:].sum(1)])
+        albedo[j], lobes[j] = np.split(nonnegative_solve(normal.numpy(), right.numpy()), [3])
+    floor = MIN_START_REFLECTANCE
+    return (torch.as_tensor(albedo, dtype=torch.float32).clamp_min(floor)[materials],
+            torch.as_tensor(lobes, dtype=torch.float32).clamp_min(floor))
+
+
+def nonnegative_solve(normal: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """(k,) x ≥ 0 minimising |A x − b|² given its normal equations A^T A = ``normal`` (k, k),
+    A^T b = ``right`` (k,): the non-negative least squares of L^T x ≈ L⁻¹ A^T b, L L^T the
+    Cholesky factor of ``normal`` (lifted by 10⁻⁹ of its trace, so a column of zeros is solved)."""
+    lifted = normal + np.eye(len(normal)) * 1e-9 * np.trace(normal)
+    factor = np.linalg.cholesky(lifted)
+    return nnls(factor.T, np.linalg.solve(factor, right))[0]
 
 
 def material_labels(target: torch.Tensor, count: int, seed: int = 0) -> torch.Tensor:
