@@ -623,8 +623,13 @@ def start_reflectance(target: torch.Tensor, shading: torch.Tensor, cosine: torch
 def nonnegative_solve(normal: np.ndarray, right: np.ndarray) -> np.ndarray:
     """(k,) x ≥ 0 minimising |A x − b|² given its normal equations A^T A = ``normal`` (k, k),
     A^T b = ``right`` (k,): the non-negative least squares of L^T x ≈ L⁻¹ A^T b, L L^T the
-    Cholesky factor of ``normal`` (lifted by 10⁻⁹ of its trace, so a column of zeros is solved)."""
-    lifted = normal + np.eye(len(normal)) * 1e-9 * np.trace(normal)
+    Cholesky factor of ``normal`` (lifted by 10⁻⁹ of its trace, at least of 1, so a column of
+    zeros is solved: x = 0 there).
+
+    >>> nonnegative_solve(np.zeros((2, 2)), np.zeros(2))
+    array([0., 0.])
+    """
+    lifted = normal + np.eye(len(normal)) * 1e-9 * max(np.trace(normal), 1.0)
     factor = np.linalg.cholesky(lifted)
     return nnls(factor.T, np.linalg.solve(factor, right))[0]
 
