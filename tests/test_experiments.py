@@ -2,6 +2,7 @@ import dataclasses
 import doctest
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -1684,3 +1685,43 @@ def test_flattening_read_fits_each_reading_and_reads_its_flattening_both_ways():
     assert text.splitlines()[1].split()[:4] == ["benchmark", "sphere", "12", "as"]
     counted = [line.split() for line in text.splitlines() if line.startswith(("slant", "zenith"))]
     assert len(counted) == 4 and sum(int(c[2]) for c in counted) == 2
+
+
+def _case_json(folder: Path, case: str, network: float, start: float, final: float, limit, flattened=None,
+               both: bool = False) -> None:
+    """A benchmark case's result json with the fields flattening_limits.py reads."""
+    evidence = {} if flattened is None else {"flattened_deg": flattened}
+    reason = "fitted as read and half turned: …" if both else "with the shared frame held: …"
+    stages = [{"stage": "network", "dir": network}, {"stage": "reversal", "dir": start},
+              {"stage": "selfcal", "dir": final, "reason": reason, "evidence": evidence}]
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / f"{case}.json").write_text(json.dumps(
+        {"stages": stages, "light": {"selfcal": {"max_flattening_deg": limit}}}))
+
+
+def test_flattening_limits_pick_each_case_from_the_run_its_held_fit_falls_in(tmp_path, capsys):
+    """Under a limit L a case's lights are the free run's where its held fit flattened them by no
+    more than L, else the limited run's; limits below the limited run's, and runs not made as
+    named, are refused."""
+    study = load_script("lb_flattening_limits", "experiments/light_benchmark/flattening_limits.py")
+    for case, flat, limited, free in (("benchmark-a-12", 1.2, 5.0, 5.0), ("benchmark-b-12", 1.8, 6.0, 4.0),
+                                      ("benchmark-c-12", 3.5, 7.0, 12.0), ("diligent-rig-d-96", 2.5, 3.0, 4.0)):
+        _case_json(tmp_path / "lim", case, 8.0, 8.0, limited, 1.5, 0.5)
+        _case_json(tmp_path / "free", case, 8.0, 8.0, free, None, flat, both=case.startswith("benchmark-c"))
+    study.main(["--results", str(tmp_path), "--limited", "lim", "--free", "free", "--limits", "1.5", "2", "none"])
+    lines = capsys.readouterr().out.splitlines()
+    headers = [i for i, line in enumerate(lines) if "cases; network" in line]
+    assert [lines[i].split(" (")[0] for i in headers] == ["benchmark 12", "diligent-rig 96"]
+    assert lines[-1].split()[0] == "diligent-rig-d-96"     # flattened past 1.5°, the two runs differ
+    lines = lines[headers[0]:headers[1]]
+    means = dict(re.match(r"  (.+?)\s+([\d.]+)°  ratio", line).groups() for line in lines if "ratio" in line)
+    assert means == {"limit 1.5°": "6.00", "limit 2°": "5.33", "no limit": "7.00"}
+    assert any("raised >1°:  1  >2°:  1" in line for line in lines if line.startswith("  no limit"))
+    assert [line.split()[0] for line in lines if line.startswith("    ")] == ["benchmark-b-12", "benchmark-c-12"]
+    assert "*" in [line for line in lines if "benchmark-c-12" in line][0]
+    with pytest.raises(SystemExit):
+        study.main(["--results", str(tmp_path), "--limited", "lim", "--free", "free", "--limits", "1"])
+    assert "below the limited run's 1.5°" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        study.main(["--results", str(tmp_path), "--limited", "free", "--free", "lim"])
+    assert "not selfcal.max_flattening_deg=null" in capsys.readouterr().err

@@ -388,7 +388,8 @@ def test_a_fit_that_takes_the_lights_nearer_the_view_axis_is_declined(glossy, ca
     steep = turned_from_the_view(glossy, 4)
     kept, verdict = self_calibrate(glossy, steep, SelfCalibration(**settings))
     assert kept is steep and verdict.outcome == "declined"
-    assert verdict.evidence["flattened_deg"] > 1.5 and "nearer the view axis" in verdict.reason
+    assert verdict.evidence["flattened_deg"] > SelfCalibration().max_flattening_deg
+    assert "nearer the view axis" in verdict.reason
     assert "declined: the fit took the lights" in caplog.text
     assert "keeping the lights it started from" in caplog.text
     fitted, verdict = self_calibrate(glossy, steep, SelfCalibration(**settings, max_flattening_deg=None))
@@ -418,7 +419,7 @@ def test_the_frame_held_fit_comes_first_and_the_pulled_fit_only_where_it_is_decl
     second, verdict = self_calibrate(glossy, steep, SelfCalibration(**settings, frame_held_first=True))
     pulled, pulled_verdict = self_calibrate(glossy, steep, SelfCalibration(**settings, **ONE_FIT))
     assert "(the fit with the shared frame held was declined: " in verdict.reason
-    assert verdict.evidence["frame_held_flattened_deg"] > 1.0
+    assert verdict.evidence["frame_held_flattened_deg"] > SelfCalibration().max_flattening_deg
     assert verdict.outcome == pulled_verdict.outcome
     np.testing.assert_array_equal(second.directions, pulled.directions)
 
@@ -438,8 +439,8 @@ def test_the_pull_toward_the_network_loosens_where_its_passes_disagree():
 def test_a_matte_sphere_under_12_lights_keeps_the_networks_lights():
     """A Lambertian sphere's images pin its lights only through integrability and a uniform
     albedo, which a real object need not have: the default self-calibration leaves the network's
-    estimate within 1° (measured with run T's weights: the frame-held fit kept, moved 0.81°, error
-    2.92° → 2.75°; the pulled fit alone 0.57°, 2.90°), the fit with the frame free and without
+    estimate within 1° (measured with run T's weights: the frame-held fit kept, moved 0.88°, error
+    2.92° → 2.62°; at `residual_weight=0.05` 1.03° and 2.46°), the fit with the frame free and without
     the pull moves it further."""
     from unps.data.analytic import render_lambertian
     from unps.lightnet.estimate import network_lights
