@@ -158,7 +158,7 @@ class SelfCalibration:
             the residual weight of 0.1) the held fits that flattened them by 1.5–2° gained on 7
             of 9 cases over the benchmark, its objects in one material and under DiLiGenT's rig
             (lost 0.80° and 0.14° on the other two), while those past 2.4° raised vase-b, the pits
-            and the tablet by 3–7°
+            and the tablet by 2.8–7.4°
             (``experiments/light_benchmark/README.md``, "Lights the fit flattens", "A looser hold
             on each light").
         turn_inside_out: where the reversal test kept the lights but warned that they may read
