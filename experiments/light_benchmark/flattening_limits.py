@@ -21,13 +21,15 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
 
-DEFAULT_RESULTS = Path.home() / ".cache" / "unps" / "light_benchmark" / "results"
+sys.path.insert(0, str(Path(__file__).parent))
+import benchmark  # noqa: E402
+
 BOTH_READINGS = "fitted as read and half turned"
-GROUP_ORDER = ("benchmark", "diligent-rig", "diligent", "single", "synthetic")
 
 
 def case_row(result: dict) -> dict:
@@ -53,7 +55,7 @@ def read_run(folder: Path) -> dict[str, dict]:
 
 def group_of(case: str) -> str:
     """The benchmark group of a case's name (``group-object-set``)."""
-    return next((g for g in GROUP_ORDER if case.startswith(g + "-")), case.split("-", 1)[0])
+    return next(g for g in benchmark.GROUPS if case.startswith(g + "-"))
 
 
 def under_limit(limited: dict, free: dict, limit: float | None) -> float:
@@ -79,8 +81,7 @@ def report(limited_run: dict, free_run: dict, limits: list[float | None], below:
     whose held fit flattened past ``below`` (the limited run's limit) and whose two runs differ."""
     common = sorted(set(limited_run) & set(free_run))
     keys = sorted({(group_of(case), case.rsplit("-", 1)[1]) for case in common},
-                  key=lambda k: (GROUP_ORDER.index(k[0]) if k[0] in GROUP_ORDER else len(GROUP_ORDER),
-                                 k[0], -int(k[1])))
+                  key=lambda k: (benchmark.GROUPS.index(k[0]), -int(k[1])))
     lines = []
     for group, label in keys:
         cases = [c for c in common if group_of(c) == group and c.endswith("-" + label)]
@@ -104,7 +105,7 @@ def report(limited_run: dict, free_run: dict, limits: list[float | None], below:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--results", type=Path, default=DEFAULT_RESULTS,
+    parser.add_argument("--results", type=Path, default=benchmark.DEFAULT_CACHE / "results",
                         help="the benchmark's results folder")
     parser.add_argument("--limited", required=True, help="tag of the run with the limit")
     parser.add_argument("--free", required=True, help="tag of the run with selfcal.max_flattening_deg=null")
