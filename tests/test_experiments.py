@@ -1725,3 +1725,6 @@ def test_flattening_limits_pick_each_case_from_the_run_its_held_fit_falls_in(tmp
     with pytest.raises(SystemExit):
         study.main(["--results", str(tmp_path), "--limited", "free", "--free", "lim"])
     assert "not selfcal.max_flattening_deg=null" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        study.main(["--results", str(tmp_path), "--limited", "nowhere", "--free", "free"])
+    assert f"{tmp_path / 'nowhere'}: no benchmark results there" in capsys.readouterr().err
