@@ -1688,7 +1688,7 @@ def test_flattening_read_fits_each_reading_and_reads_its_flattening_both_ways():
 
 
 def _case_json(folder: Path, case: str, network: float, start: float, final: float, limit, flattened=None,
-               both: bool = False) -> None:
+               both: bool = False, rounds: int = 1) -> None:
     """A benchmark case's result json with the fields flattening_limits.py reads."""
     evidence = {} if flattened is None else {"flattened_deg": flattened}
     reason = "fitted as read and half turned: …" if both else "with the shared frame held: …"
@@ -1696,7 +1696,7 @@ def _case_json(folder: Path, case: str, network: float, start: float, final: flo
               {"stage": "selfcal", "dir": final, "reason": reason, "evidence": evidence}]
     folder.mkdir(parents=True, exist_ok=True)
     (folder / f"{case}.json").write_text(json.dumps(
-        {"stages": stages, "light": {"selfcal": {"max_flattening_deg": limit}}}))
+        {"stages": stages, "light": {"selfcal": {"max_flattening_deg": limit, "rounds": rounds}}}))
 
 
 def test_flattening_limits_pick_each_case_from_the_run_its_held_fit_falls_in(tmp_path, capsys):
@@ -1725,6 +1725,10 @@ def test_flattening_limits_pick_each_case_from_the_run_its_held_fit_falls_in(tmp
     with pytest.raises(SystemExit):
         study.main(["--results", str(tmp_path), "--limited", "free", "--free", "lim"])
     assert "not selfcal.max_flattening_deg=null" in capsys.readouterr().err
+    _case_json(tmp_path / "rounds", "benchmark-a-12", 8.0, 8.0, 5.0, 1.5, 0.5, rounds=3)
+    with pytest.raises(SystemExit):
+        study.main(["--results", str(tmp_path), "--limited", "rounds", "--free", "free"])
+    assert "rounds: its cases were run with selfcal.rounds=[3], not 1" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         study.main(["--results", str(tmp_path), "--limited", "nowhere", "--free", "free"])
     assert f"{tmp_path / 'nowhere'}: no benchmark results there" in capsys.readouterr().err

@@ -1,7 +1,9 @@
 """Other limits on flattening, read off two benchmark runs: one with the limit, one without.
 
-    python experiments/light_benchmark/benchmark.py --set selfcal.max_flattening_deg=null --tag free
-    python experiments/light_benchmark/flattening_limits.py --limited S2 --free free --limits 2 2.5 3 none
+    python experiments/light_benchmark/benchmark.py --set selfcal.rounds=1 --tag one
+    python experiments/light_benchmark/benchmark.py --set selfcal.rounds=1 \
+        selfcal.max_flattening_deg=null --tag free
+    python experiments/light_benchmark/flattening_limits.py --limited one --free free --limits 2.5 3 none
 
 ``light.selfcal.max_flattening_deg`` only decides, case by case, whether the fit with the shared
 frame held is kept: where it flattened the lights by no more than the limit, the lights are that
@@ -10,7 +12,9 @@ that takes over (or the lights it started from) is the same under every limit at
 limited run's (that run has them). So for each limit at or above the limited run's, a case's final
 lights are read from one of the two runs. Not exact where the reversal test warned of a reading
 inside out and both readings were fitted (``light.selfcal.turn_inside_out``): there the limit acts
-on each reading's fit, and the choice between them on both; such cases are marked ``*``.
+on each reading's fit, and the choice between them on both; such cases are marked ``*``. Read off
+runs of one fit each (``--set selfcal.rounds=1``): the limit also decides which later round is
+kept (``light.selfcal.rounds``), which neither run records.
 
 Printed per group and light set: the mean final direction error under each limit, the cases it
 raises by more than 1° and 2° over the start (after the reversal test), and the cases whose held fit
@@ -44,7 +48,8 @@ def case_row(result: dict) -> dict:
                                                 selfcal.get("evidence", {}).get("flattened_deg", np.nan))
     return {"network": stages["network"]["dir"], "start": start["dir"], "final": result["stages"][-1]["dir"],
             "flattened": float(flattened), "both": BOTH_READINGS in selfcal.get("reason", ""),
-            "limit": result["light"]["selfcal"]["max_flattening_deg"]}
+            "limit": result["light"]["selfcal"]["max_flattening_deg"],
+            "rounds": result["light"]["selfcal"].get("rounds", 1)}
 
 
 def read_run(folder: Path) -> dict[str, dict]:
@@ -116,6 +121,11 @@ def main(argv=None) -> None:
         runs[tag] = read_run(args.results / tag)
         if not runs[tag]:
             parser.error(f"{args.results / tag}: no benchmark results there")
+        rounds = {row["rounds"] for row in runs[tag].values()} - {1}
+        if rounds:
+            parser.error(f"{tag}: its cases were run with selfcal.rounds={sorted(rounds)}, not 1: each "
+                         f"round after the first is kept or not by the limit too, which a run "
+                         f"without it does not record")
     free_limits = {row["limit"] for row in runs[args.free].values()}
     if free_limits != {None}:
         parser.error(f"--free {args.free}: its cases were run with limits {sorted(free_limits, key=str)}, "

@@ -44,8 +44,9 @@ import runs  # noqa: E402
 import scenes  # noqa: E402
 
 FREE = SelfCalibration(device="cpu", prior_weight=0.0, skip_black=True, censor_black=False,
-                       frame_held_first=False)
-HELD = SelfCalibration(device="cpu", censor_black=False, frame_held_first=False)  # shipped to 2026-11-27
+                       frame_held_first=False, rounds=1)
+HELD = SelfCalibration(device="cpu", censor_black=False, frame_held_first=False,
+                       rounds=1)                                  # shipped to 2026-11-27
 MARGINS = (0.0, 0.02, 0.05)      # n_z margins the outline rule tries
 
 

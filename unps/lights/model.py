@@ -212,6 +212,22 @@ class SelfCalibrationModel(nn.Module):
     def forward(self, visible: torch.Tensor | None = None) -> torch.Tensor:
         """(m, n, 3) the rendered images at the object pixels, cast shadows where ``visible``
         (m, n) is 0 (None: every light reaches every pixel)."""
+        lit, specular = self.lit_and_lobes(visible)
+        return lit * (self.log_albedo.exp()[:, None, :] + specular[..., None])
+
+    @torch.no_grad()
+    def highlight_share(self, visible: torch.Tensor | None = None) -> float:
+        """The share of the rendered light (summed over the pixels, images and channels) that the
+        specular lobes put there, the rest being the albedo's: about 0 for a matte surface."""
+        lit, specular = self.lit_and_lobes(visible)
+        highlights = (lit * specular[..., None]).sum()
+        diffuse = (lit * self.log_albedo.exp()[:, None, :]).sum()
+        return float(highlights / (highlights + diffuse).clamp_min(1e-12))
+
+    def lit_and_lobes(self, visible: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """(m, n, 3) the light reaching each pixel, its colour and n·l (0 in cast shadows, where
+        ``visible`` (m, n) is 0), and (m, n) the sum of its material's specular lobes there: the
+        rendering is their product with albedo + lobes."""
         directions, intensities = self.lights()
         normals = self.normals()
         shading = (normals @ directions.T).clamp_min(0)                                    # (m, n)
@@ -220,7 +236,6 @@ class SelfCalibrationModel(nn.Module):
         lobes = self.lobes()
         weights = lobes[0] if len(lobes) == 1 else lobes[self.materials]
         specular = SpecularLobes.apply(cosine, weights, self.sharpness)
-        radiance = self.log_albedo.exp()[:, None, :] + specular[..., None]
         if visible is not None:
             shading = shading * visible
-        return ((intensities[:, None] * self.tints())[None] * shading[..., None]) * radiance
+        return (intensities[:, None] * self.tints())[None] * shading[..., None], specular
