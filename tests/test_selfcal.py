@@ -423,7 +423,7 @@ def test_the_frame_held_fit_comes_first_and_the_pulled_fit_only_where_it_is_decl
     np.testing.assert_array_equal(first.directions, alone.directions)
     steep = turned_from_the_view(glossy, 4)
     second, verdict = self_calibrate(glossy, steep, SelfCalibration(**settings, frame_held_first=True))
-    pulled, pulled_verdict = self_calibrate(glossy, steep, SelfCalibration(**settings, **ONE_FIT))
+    pulled, pulled_verdict = self_calibrate(glossy, steep, SelfCalibration(**{**settings, **ONE_FIT}))
     assert "(the fit with the shared frame held was declined: " in verdict.reason
     assert verdict.evidence["frame_held_flattened_deg"] > SelfCalibration().max_flattening_deg
     assert verdict.outcome == pulled_verdict.outcome
