@@ -216,10 +216,11 @@ class SelfCalibrationModel(nn.Module):
         return lit * (self.log_albedo.exp()[:, None, :] + specular[..., None])
 
     @torch.no_grad()
-    def highlight_share(self, visible: torch.Tensor | None = None) -> float:
-        """The share of the rendered light (summed over the pixels, images and channels) that the
-        specular lobes put there, the rest being the albedo's: about 0 for a matte surface."""
-        lit, specular = self.lit_and_lobes(visible)
+    def highlight_share(self) -> float:
+        """The share of the rendered light (summed over the pixels, images and channels; no cast
+        shadows) that the specular lobes put there, the rest being the albedo's: about 0 for a
+        matte surface."""
+        lit, specular = self.lit_and_lobes()
         highlights = (lit * specular[..., None]).sum()
         diffuse = (lit * self.log_albedo.exp()[:, None, :]).sum()
         return float(highlights / (highlights + diffuse).clamp_min(1e-12))

@@ -290,14 +290,8 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
     if settings.max_flattening_deg is not None and not settings.max_flattening_deg >= 0:
         raise InputError(f"light.selfcal.max_flattening_deg must be a number of degrees >= 0, or null "
                          f"(never decline), got {settings.max_flattening_deg}")
-    rounds = settings.rounds
-    if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
-        raise InputError(f"light.selfcal.rounds must be a whole number >= 1 (1: one fit from the first "
-                         f"guess), got {rounds!r}")
-    materials = settings.materials
-    if isinstance(materials, bool) or not isinstance(materials, int) or materials < 1:
-        raise InputError(f"light.selfcal.materials must be a whole number >= 1 (1: one set of specular "
-                         f"lobes for the whole object), got {materials!r}")
+    require_count("rounds", settings.rounds, "one fit from the first guess")
+    require_count("materials", settings.materials, "one set of specular lobes for the whole object")
     if settings.shadows_every < 0 or int(settings.shadows_every) != settings.shadows_every:
         raise InputError(f"light.selfcal.shadows_every must be a whole number of steps >= 0 (0: no "
                          f"cast shadows), got {settings.shadows_every}")
@@ -329,6 +323,16 @@ def self_calibrate(subject: Subject, lights: Lights, settings: SelfCalibration =
                     "lights.png, and calibrate the lights (light=gt) if you can",
                     verdict.evidence["moved_deg"], start)
     return fitted, verdict
+
+
+def require_count(name: str, value, one: str) -> None:
+    """Refuse ``light.selfcal.<name>`` unless it is a whole number ≥ 1 (``one``: what 1 means).
+
+    Raises:
+        InputError: naming the setting and the value.
+    """
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise InputError(f"light.selfcal.{name} must be a whole number >= 1 (1: {one}), got {value!r}")
 
 
 @dataclass(frozen=True)
