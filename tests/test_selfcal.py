@@ -14,7 +14,10 @@ from unps.errors import InputError
 from unps.lights import Lights, light_errors
 from unps.lights.factorization import normals_under
 from unps.lights.reversal import HALF_TURN
-from unps.lights.model import MIN_EXPONENT, DepthPyramid, SelfCalibrationModel, SpecularLobes, normals_from_depth
+from unps.geometry import integrate_normals
+from unps.lights.model import (MIN_EXPONENT, DepthPyramid, SelfCalibrationModel, SpecularLobes, facet_kernel,
+                               normals_from_depth)
+from unps.solvers.nayar import interreflection_kernel
 from unps.lights.selfcal import (AS_READ_MARGIN, HALF_TURN_MARGIN, SelfCalibration, half_turn_kept,
                                  material_labels, self_calibrate, unsure_reading)
 from unps.metrics import angular_error
@@ -200,6 +203,58 @@ def test_self_calibration_of_a_bowl_holds_once_its_cast_shadows_are_rendered():
         steps=600, max_pixels=1200, shadows_every=every, **FREE))[0], bowl)["light_dir_mae"]
         for every in (0, 100)}
     assert errors[100] < 3.0 and errors[0] > 4.5, errors
+
+
+def bowl_with_a_bounce(albedo: float = 0.7) -> tuple[Subject, float]:
+    """:func:`rendered`'s bowl with one bounce of its diffuse light (Nayar's kernel on every pixel,
+    reflectance ``albedo``), and the share of the light that bounce adds."""
+    bowl = rendered(concave=True)
+    depth = np.nan_to_num(integrate_normals(bowl.normals, bowl.mask))
+    direct = bowl.images[:, bowl.mask, 0]                                               # (n, m)
+    bounce = albedo * (interreflection_kernel(depth, bowl.normals, bowl.mask) @ direct.T).T
+    images = bowl.images.copy()
+    images[:, bowl.mask] += bounce[..., None]
+    return bowl.replace(images=images), float(bounce.sum() / direct.sum())
+
+
+def test_a_plane_sends_itself_no_light_and_a_bowls_blocks_send_what_its_pixels_do():
+    mask = torch.ones(20, 20, dtype=torch.bool)
+    up = torch.tensor([[0.0, 0.0, 1.0]]).repeat(400, 1)
+    plane = facet_kernel(torch.zeros(20, 20), mask, up, 100)
+    assert plane.kernel.shape == (100, 100) and not plane.kernel.any()            # 2 × 2 blocks
+    bowl = rendered(concave=True)
+    depth = torch.as_tensor(np.nan_to_num(integrate_normals(bowl.normals, bowl.mask)))
+    mask, normals = torch.as_tensor(bowl.mask), torch.as_tensor(bowl.normals[bowl.mask])
+    radiance = torch.as_tensor(bowl.images[:, bowl.mask]).permute(1, 0, 2)          # (m, n, 3)
+    every_pixel = interreflection_kernel(depth.numpy(), bowl.normals, bowl.mask)
+    exact = torch.as_tensor(every_pixel @ radiance[..., 0].double().numpy()).float()
+    torch.testing.assert_close(facet_kernel(depth, mask, normals, len(radiance)).received(radiance)[..., 1],
+                               exact, atol=1e-5, rtol=1e-4)
+    blocks = facet_kernel(depth, mask, normals, 400)
+    assert len(blocks.counts) <= 400
+    coarse = blocks.received(radiance)[..., 1]
+    assert float((coarse - exact).abs().mean() / exact.mean()) < 0.1
+
+
+def test_rendering_a_bowls_interreflections_keeps_the_lights_they_would_bend():
+    bowl, bounce_share = bowl_with_a_bounce()
+    assert bounce_share > 0.2
+    truth = Lights(bowl.light_directions, None, "true")
+    errors, shares = {}, {}
+    for interreflection in (False, True):
+        fitted, verdict = self_calibrate(bowl, truth, dataclasses.replace(
+            QUICK, interreflection=interreflection, prior_weight=0.0, max_flattening_deg=None, **ONE_FIT))
+        errors[interreflection] = light_errors(fitted, bowl)["light_dir_mae"]
+        shares[interreflection] = verdict.evidence.get("bounce_share")
+    assert errors[False] > 4.0 and errors[True] < 1.5, errors
+    assert shares[False] is None and 0.6 * bounce_share < shares[True] < 1.2 * bounce_share, shares
+
+
+def test_a_domes_fit_keeps_its_interreflections_faint(glossy):
+    fitted, verdict = self_calibrate(glossy, Lights(glossy.light_directions, None, "true"),
+                                     dataclasses.replace(QUICK, interreflection=True, **ONE_FIT))
+    assert verdict.evidence["bounce_share"] < 0.005
+    assert light_errors(fitted, glossy)["light_dir_mae"] < 1.0
 
 
 def eight_bit(subject: Subject, black_columns: int) -> Subject:
@@ -623,7 +678,7 @@ def test_a_reading_the_reversal_test_turned_is_not_turned_back_however_unsure_th
 
 
 @pytest.mark.parametrize("name, value", [("turn_inside_out", "ture"), ("decline_inside_out", 1),
-                                         ("frame_held_first", "no")])
+                                         ("frame_held_first", "no"), ("interreflection", "on")])
 def test_a_switch_that_is_not_true_or_false_is_refused_by_name(name, value):
     dome = rendered(concave=False)
     with pytest.raises(InputError, match=rf"light.selfcal.{name} must be true or false, got {value!r}"):

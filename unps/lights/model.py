@@ -10,7 +10,11 @@ integrable), ρ_p an RGB diffuse albedo,
 w_jk ≥ 0 the weights of K spherical-Gaussian specular lobes of fixed sharpness κ_k, shared by the
 pixels of one material j (the object's pixels are split into a few materials by colour before the
 fit, :func:`unps.lights.selfcal.material_labels`), h_i the half vector between l_i and the view
-v = (0, 0, 1) (orthographic), and (l_i, e_i) the direction and intensity of light i.
+v = (0, 0, 1) (orthographic), and (l_i, e_i) the direction and intensity of light i. With
+interreflections on, each pixel adds a · ρ_p · Σ_q K_pq B_qi, one bounce of the diffuse light B_qi =
+V_iq e_i max(n_q·l_i, 0) ρ_q the other parts of the surface send it, through Nayar's kernel K
+(:func:`facet_kernel`) of the current depth, and a a fitted scale that turns the albedo into a
+reflectance (the images' exposure is unknown).
 
 The lights are parameterised around a first guess s̃_i (the light network's directions; the
 images are divided by its intensities): s_i = (s̃_i + ε_i)·A, l_i = s_i / |s_i|, e_i = |s_i|
@@ -26,12 +30,15 @@ Frame: x right (+col), y up (−row), z toward the camera; depth in pixels of th
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
 
 from unps.geometry import cast_shadows
+from unps.solvers.nayar import interreflection_kernel
 
 VIEW = (0.0, 0.0, 1.0)
 MIN_EXPONENT = -60.0   # lobes below e⁻⁶⁰ are cut: float32 denormals would make the CPU crawl
@@ -136,6 +143,66 @@ class DepthPyramid(nn.Module):
         return depth
 
 
+@dataclass(frozen=True)
+class FacetKernel:
+    """Nayar's interreflection kernel between blocks (facets) of the working grid.
+
+    Attributes:
+        index: (m,) the facet of each object pixel, 0 … f − 1.
+        counts: (f,) object pixels per facet.
+        kernel: (f, f) K_ij (:func:`unps.solvers.nayar.interreflection_kernel`): the light facet
+            i receives from facet j per unit of j's radiance.
+    """
+
+    index: torch.Tensor
+    counts: torch.Tensor
+    kernel: torch.Tensor
+
+    def to(self, device: torch.device) -> FacetKernel:
+        return FacetKernel(self.index.to(device), self.counts.to(device), self.kernel.to(device))
+
+    def received(self, radiance: torch.Tensor) -> torch.Tensor:
+        """(m, n, 3) the light each pixel receives from the other facets, Σ_j K_ij B_j, with B_j
+        the facet's mean of ``radiance`` (m, n, 3): what one bounce adds, times its albedo."""
+        pooled = torch.zeros(len(self.counts), *radiance.shape[1:], dtype=radiance.dtype,
+                             device=radiance.device).index_add_(0, self.index, radiance)
+        pooled = pooled / self.counts[:, None, None]
+        return (self.kernel @ pooled.flatten(1)).view_as(pooled)[self.index]
+
+
+def facet_kernel(depth: torch.Tensor, mask: torch.Tensor, normals: torch.Tensor,
+                 max_facets: int) -> FacetKernel:
+    """The interreflection kernel of a depth map on blocks of s × s pixels, s the least that
+    leaves at most ``max_facets`` blocks with an object pixel (the kernel is O(f²)).
+
+    Args:
+        depth: (H, W) in pixels of the grid; mask: (H, W) bool with m object pixels.
+        normals: (m, 3) unit normals at the object pixels (row-major).
+    """
+    rows, cols = (i.cpu().numpy() for i in torch.nonzero(mask.cpu(), as_tuple=True))
+    side = max(1, math.ceil(math.sqrt(len(rows) / max_facets)))
+    while True:
+        width = -(-mask.shape[1] // side)
+        flat = rows // side * width + cols // side
+        if len(np.unique(flat)) <= max_facets:
+            break
+        side += 1
+    occupied, index = np.unique(flat, return_inverse=True)
+    counts = np.bincount(index).astype(np.float64)
+    height = -(-mask.shape[0] // side)
+    on = np.zeros(height * width, bool)
+    on[occupied] = True
+    on = on.reshape(height, width)
+    facet_depth = np.zeros((height, width))
+    facet_depth[on] = np.bincount(index, depth.detach().cpu().double().numpy()[rows, cols]) / counts / side
+    summed = np.stack([np.bincount(index, c) for c in normals.detach().cpu().double().numpy().T], -1)
+    facet_normals = np.zeros((height, width, 3))
+    facet_normals[on] = summed / np.maximum(np.linalg.norm(summed, axis=-1, keepdims=True), 1e-12)
+    kernel = interreflection_kernel(facet_depth, facet_normals, on)
+    return FacetKernel(torch.as_tensor(index), torch.as_tensor(counts, dtype=torch.float32),
+                       torch.as_tensor(kernel, dtype=torch.float32))
+
+
 class SelfCalibrationModel(nn.Module):
     """Lights (directions, intensities and colours), depth, albedo and specular lobes of one
     subject on its working grid.
@@ -148,12 +215,24 @@ class SelfCalibrationModel(nn.Module):
         materials: (m,) each pixel's material j, 0 … J − 1, each with its own lobe weights;
             None: one material.
         lobes: (J, K) starting lobe weights w_jk > 0; None: every one e⁻⁵ (nearly off).
+        max_facets: render one bounce of diffuse interreflection too, on blocks of the grid, at
+            most this many (:func:`facet_kernel`): each pixel also reflects, with its albedo times
+            a fitted scale a (0 < a < 2 / the start's 99th-percentile albedo, started at an
+            eighth of that: a cavity's images raise it, a convex surface's leave it low), the
+            diffuse light the other blocks send it, as :meth:`update_received` last found it;
+            None: no interreflection.
     """
 
     def __init__(self, scaled_lights: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor,
                  albedo: torch.Tensor, sharpness: tuple[float, ...], levels: int = 4,
-                 materials: torch.Tensor | None = None, lobes: torch.Tensor | None = None):
+                 materials: torch.Tensor | None = None, lobes: torch.Tensor | None = None,
+                 max_facets: int | None = None):
         super().__init__()
+        self.max_facets = max_facets
+        self.receiving = False         # whether the last update found any light sent between facets
+        self.register_buffer("received", torch.zeros(len(albedo) if max_facets else 0, len(scaled_lights), 3))
+        self.register_buffer("bounce_limit", 2 / torch.quantile(albedo.mean(1), 0.99).clamp_min(1e-6))
+        self.bounce_logit = nn.Parameter(torch.tensor(-2.0))
         self.register_buffer("scaled_lights", scaled_lights.float())
         self.register_buffer("mask", mask)
         self.register_buffer("sharpness", torch.tensor(sharpness, dtype=torch.float32))
@@ -211,9 +290,42 @@ class SelfCalibrationModel(nn.Module):
 
     def forward(self, visible: torch.Tensor | None = None) -> torch.Tensor:
         """(m, n, 3) the rendered images at the object pixels, cast shadows where ``visible``
-        (m, n) is 0 (None: every light reaches every pixel)."""
+        (m, n) is 0 (None: every light reaches every pixel), plus one bounce of the light the
+        other facets sent at the last :meth:`update_received`."""
         lit, specular = self.lit_and_lobes(visible)
-        return lit * (self.log_albedo.exp()[:, None, :] + specular[..., None])
+        albedo = self.log_albedo.exp()[:, None, :]
+        rendered = lit * (albedo + specular[..., None])
+        if not self.receiving:         # none yet, or a convex surface: no facet sees another
+            return rendered
+        return rendered + self.bounce_scale() * albedo * self.received
+
+    def bounce_scale(self) -> torch.Tensor:
+        """() a: the albedo's share that is reflectance, for the light received from other facets."""
+        return self.bounce_limit * torch.sigmoid(self.bounce_logit)
+
+    @torch.no_grad()
+    def update_received(self, visible: torch.Tensor | None = None) -> None:
+        """Σ_j K_ij B_j at every pixel, the kernel made from the current depth and B the current
+        diffuse radiance (cast shadows where ``visible`` (m, n) is 0): held until the next
+        update. The kernel follows the depth: made once from the start's, which the images'
+        interreflections leave shallower than the surface, it renders too little of them and
+        the lights bend all the same."""
+        if self.max_facets is None:
+            return
+        kernel = facet_kernel(self.depth(), self.mask, self.normals(), self.max_facets)
+        lit, _ = self.lit_and_lobes(visible)
+        self.received.copy_(kernel.to(self.received.device).received(lit * self.log_albedo.exp()[:, None, :]))
+        self.receiving = bool(kernel.kernel.any())
+
+    @torch.no_grad()
+    def bounce_share(self) -> float:
+        """The share of the rendered light (no cast shadows) that the last :meth:`update_received`
+        adds by interreflection: 0 without it, about 0 on a convex surface."""
+        if not self.receiving:
+            return 0.0
+        rendered = self()
+        bounced = self.bounce_scale() * self.log_albedo.exp()[:, None, :] * self.received
+        return float(bounced.sum() / rendered.sum().clamp_min(1e-12))
 
     @torch.no_grad()
     def highlight_share(self) -> float:
