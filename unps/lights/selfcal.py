@@ -935,7 +935,6 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
         observe(step, directions_of(model))
     with torch.no_grad():
         visible = model.visibility() if every else None
-        model.update_received(visible)
         loss, pull = total(visible)
         return loss.item(), pull.item(), step
 
