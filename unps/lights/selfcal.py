@@ -889,7 +889,8 @@ def fit(model: SelfCalibrationModel, target: torch.Tensor, settings: SelfCalibra
 
     Returns:
         The objective and the prior's pull at the end, with the shadows of the final depth and
-        lights, and the steps taken.
+        lights (and the received light of the last update, which the fitted scale was fitted
+        to), and the steps taken.
     """
     every = settings.shadows_every
     visible = None
