@@ -10,6 +10,7 @@ from unps.data.analytic import dome_lights, height_field, render_lambertian
 from unps.data.subject import Subject
 from unps.geometry import cast_shadows
 from unps.lights.reversal import HALF_TURN
+from unps.solvers.nayar import interreflection_kernel
 
 SHARED_DATA = Path(os.environ.get("UNPS_SHARED_DATA",
                                   Path(__file__).resolve().parents[2] / "shared" / "data"))
@@ -65,6 +66,14 @@ def rendered(concave: bool, size: int = 48, n_lights: int = 32) -> Subject:
 TINY = dict(name="tiny", width=16, depth=3, first_kernel=1, reflectance_width=8, steps=20,
             lr_drop_at=18, images_per_step=8, update_every=10)
 """A preset small enough for a test: a 20-step fit of a small subject in seconds."""
+
+
+def one_bounce(direct: np.ndarray, depth: np.ndarray, normals: np.ndarray, mask: np.ndarray,
+               albedo: float) -> np.ndarray:
+    """(n, m) the first bounce of a Lambertian surface's ``direct`` light (n, m) at its ``mask``'s
+    m pixels: Nayar's kernel on the surface (``depth`` (H, W) in pixels, ``normals`` (H, W, 3)),
+    reflectance ``albedo``."""
+    return albedo * (interreflection_kernel(depth, normals, mask) @ direct.T).T
 
 
 def tiny_fit(subject: Subject, **preset):

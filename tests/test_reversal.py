@@ -5,7 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from conftest import rendered
+from conftest import one_bounce, rendered
 from unps.data.analytic import dome_lights, height_field
 from unps.data.subject import Subject
 from unps.errors import InputError
@@ -15,7 +15,6 @@ from unps.lights.reversal import (HALF_TURN, AttachedLight, ReversalTest, Shadow
 from unps.lights.selfcal import SelfCalibration
 from unps.lights.stages import run_stages
 from unps.metrics import angular_error
-from unps.solvers.nayar import interreflection_kernel
 from unps.solvers.rpca import robust_init
 
 
@@ -133,7 +132,7 @@ def interreflected(concave: bool, albedo: float = 0.7, size: int = 40, n_lights:
         depth, normals = -depth, normals @ HALF_TURN.astype(np.float32)
     lights = dome_lights(n_lights, seed=3)
     direct = albedo * np.maximum(np.einsum("hwc,nc->nhw", normals, lights), 0)[:, mask]   # (n, m)
-    bounce = albedo * (interreflection_kernel(depth, normals, mask) @ direct.T).T
+    bounce = one_bounce(direct, depth, normals, mask, albedo)
     images = np.zeros((n_lights, size, size, 3), np.float32)
     images[:, mask] = (direct + bounce)[..., None]
     return Subject("bowl" if concave else "dome", images, mask, light_directions=lights,

@@ -7,7 +7,7 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from conftest import rendered
+from conftest import one_bounce, rendered
 from unps.data.lights import Verdict
 from unps.data.subject import Subject
 from unps.errors import InputError
@@ -211,7 +211,7 @@ def bowl_with_a_bounce(albedo: float = 0.7) -> tuple[Subject, float]:
     bowl = rendered(concave=True)
     depth = np.nan_to_num(integrate_normals(bowl.normals, bowl.mask))
     direct = bowl.images[:, bowl.mask, 0]                                               # (n, m)
-    bounce = albedo * (interreflection_kernel(depth, bowl.normals, bowl.mask) @ direct.T).T
+    bounce = one_bounce(direct, depth, bowl.normals, bowl.mask, albedo)
     images = bowl.images.copy()
     images[:, bowl.mask] += bounce[..., None]
     return bowl.replace(images=images), float(bounce.sum() / direct.sum())
