@@ -836,6 +836,45 @@ def test_selfcal_steps_reads_the_marks_and_settle_lines_under_the_limit_asked_fo
     assert "--limits: give degrees or none" in capsys.readouterr().err
 
 
+def test_rounds_trace_reads_each_rounds_lights_off_the_fits_starts():
+    """Round k + 1's fit starts from round k's lights; a round made but not kept adds one fit that
+    starts from the lights returned; fits before the rounds (both readings, a declined held fit)
+    are skipped; a case whose rounds stopped early keeps its last lights in the later columns."""
+    study = load_script("lb_rounds_trace", "experiments/light_benchmark/rounds_trace.py")
+
+    def light(x):
+        return np.array([[x, 0.0, 1.0]])
+
+    reads = [(0, light(0)), (100, light(0.5)), (200, light(0.6)),       # the reading as read
+             (0, light(5)), (200, light(5.5)),                             # its half turn
+             (0, light(0)), (300, light(1)),                               # round 1 (first fit)
+             (0, light(1)), (300, light(2)),                               # round 2
+             (0, light(2)), (300, light(7))]                               # round 3: not kept
+    starts = study.fit_starts(reads)
+    assert [float(s[0, 0]) for s in starts] == [0, 5, 0, 1, 2]
+    assert [float(k[0, 0]) for k in study.kept_after_rounds(starts, light(2), made=2)] == [1, 2]
+    assert [float(k[0, 0]) for k in study.kept_after_rounds(starts[:4], light(2), made=2)] == [1, 2]
+    assert [float(k[0, 0]) for k in study.kept_after_rounds(starts[:3], light(1), made=1)] == [1]
+    case = {"network": 4.0, "rounds": [3.0, 2.0]}
+    assert [study.after_round(case, k) for k in (1, 2, 3)] == [3.0, 2.0, 2.0]
+    line = study.case_line("benchmark", "blob01", "12", case, 3)
+    assert line.split()[-3:] == ["3.00°", "2.00°", "·"]
+    other = {"network": 2.0, "rounds": [1.0, 1.0, 1.0, 2.0]}
+    lines = study.set_lines([case, other], ["blob01", "blob02"], 4)
+    assert lines[1].split()[1:] == ["2.00°", "1.50°", "1.50°", "2.00°"]
+    assert lines[2].split()[1:] == ["0.67", "0.50", "0.50", "0.67"]
+    assert lines[3].endswith("above round 3's by > 0.3°: blob02 1.00° → 2.00°")
+    assert lines[4].endswith("below round 3's by > 0.3°: none")
+
+
+def test_rounds_trace_refuses_no_rounds_before_it_makes_anything(capsys, tmp_path):
+    study = load_script("lb_rounds_trace", "experiments/light_benchmark/rounds_trace.py")
+    with pytest.raises(SystemExit):
+        study.main(["--rounds", "0", "--cache", str(tmp_path)])
+    assert "--rounds must be at least 1, got 0" in capsys.readouterr().err
+    assert not (tmp_path / "results").exists()
+
+
 def test_selfcal_steps_stops_each_trace_where_its_lights_settle():
     study = load_script("lb_selfcal_steps", "experiments/light_benchmark/selfcal_steps.py")
 

@@ -201,7 +201,10 @@ class SelfCalibration:
             lights from 5.13 / 6.33 / 7.46° to 4.63 / 5.33 / 6.67° under 96 / 20 / 12 lights,
             DiLiGenT's three from 1.96 / 2.82 / 3.08° to 1.68 / 2.06 / 2.19° (cat at 96 images
             3.33° → 2.02°), unps's Vase 9.42° → 6.90°, for about three times the fit's time
-            (``experiments/light_benchmark/README.md``, "Fitted again from where it ended").
+            (``experiments/light_benchmark/README.md``, "Fitted again from where it ended"); six
+            lowered the means further but took the objects already near the truth away from it
+            (DiLiGenT's pot1 at 96 images 1.80° → 2.33°, the tablet under 12 lights past the
+            network's reading: "How many rounds").
         turn_inside_out: where the reversal test kept the lights but warned that they may read
             the surface inside out (:attr:`unps.lights.reversal.AttachedLight.points_to_reversal`),
             or where the light network's passes disagree on them (:attr:`Lights.unsure
