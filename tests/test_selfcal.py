@@ -18,8 +18,9 @@ from unps.geometry import integrate_normals
 from unps.lights.model import (MIN_EXPONENT, DepthPyramid, SelfCalibrationModel, SpecularLobes, facet_kernel,
                                normals_from_depth)
 from unps.solvers.nayar import interreflection_kernel
-from unps.lights.selfcal import (AS_READ_MARGIN, HALF_TURN_MARGIN, SelfCalibration, half_turn_kept,
-                                 material_labels, self_calibrate, unsure_reading)
+from unps.lights.selfcal import (AS_READ_MARGIN, HALF_TURN_MARGIN, MIN_BOUNCE_SHARE, MIN_HIGHLIGHT_SHARE,
+                                 SelfCalibration, fitted_again, half_turn_kept, material_labels,
+                                 self_calibrate, unsure_reading)
 from unps.metrics import angular_error
 
 QUICK = SelfCalibration(steps=600, max_pixels=1200)
@@ -248,6 +249,29 @@ def test_rendering_a_bowls_interreflections_keeps_the_lights_they_would_bend():
         shares[interreflection] = verdict.evidence.get("bounce_share")
     assert errors[False] > 4.0 and errors[True] < 1.5, errors
     assert shares[False] is None and 0.6 * bounce_share < shares[True] < 1.2 * bounce_share, shares
+
+
+@pytest.mark.slow
+def test_a_matte_bowl_is_fitted_again_where_its_interreflections_pin_the_lights():
+    """A matte surface's lobes render next to nothing, but a cavity's interreflections pin the
+    bas-relief that shading leaves: where the fit renders them, its rounds are made."""
+    bowl, _ = bowl_with_a_bounce()
+    _, verdict = self_calibrate(bowl, rotated(bowl, 6), dataclasses.replace(QUICK, rounds=2))
+    assert verdict.evidence["highlight_share"] < MIN_HIGHLIGHT_SHARE
+    assert verdict.evidence["bounce_share"] > MIN_BOUNCE_SHARE
+    assert verdict.evidence["rounds"] == 2 and "fitted again from where it ended" in verdict.reason
+
+
+@pytest.mark.parametrize("highlights, bounce, again", [(0.001, None, False), (0.001, 0.049, False),
+                                                       (0.001, 0.05, True), (0.005, 0.0, True)])
+def test_a_round_is_made_where_the_lobes_or_the_interreflections_render_enough_of_the_light(
+        glossy, highlights, bounce, again):
+    first = Lights(glossy.light_directions, None, "selfcal")
+    evidence = {"highlight_share": highlights} | ({} if bounce is None else {"bounce_share": bounce})
+    _, verdict = fitted_again(glossy, first, first, Verdict("selfcal", "changed", "fitted", evidence),
+                              SelfCalibration(rounds=1))
+    assert verdict.evidence["rounds"] == 1
+    assert ("not fitted again: its lobes render" in verdict.reason) != again, verdict.reason
 
 
 def test_a_domes_fit_keeps_its_interreflections_faint(glossy):

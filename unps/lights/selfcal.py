@@ -25,8 +25,9 @@ enough for a CPU:
    first guess (:func:`flattening`); where both are declined the first guess is returned. One
    that moved the lights far from it warns;
 4. held light by light near the first guess, one fit undoes a transform that the network's
-   lights share (a turn, a shear of the set) only in part; where the fitted lobes render enough
-   of the light for highlights to pin the lights, the frame-held fit is made again from where
+   lights share (a turn, a shear of the set) only in part; where the fitted lobes or the
+   surface's interreflections render enough of the light to pin the lights (shading alone
+   leaves them a bas-relief), the frame-held fit is made again from where
    the last one ended, up to ``rounds`` fits in all, none kept that would take the lights past
    the limit on flattening from the first guess (:func:`fitted_again`);
 5. where the reversal test warned that the first guess may read the surface inside out
@@ -77,7 +78,8 @@ CHECK_EVERY = 100    # steps between reads of the loss (on a GPU each read waits
 AS_READ_MARGIN = 0.05    # under a warning, the half turn is kept unless its fit ends this share above
 HALF_TURN_MARGIN = 0.01  # the fit as read's; without one, only if it ends this share below
 MAX_FACETS = 1000      # blocks of the working grid the interreflection kernel joins at most
-MIN_HIGHLIGHT_SHARE = 0.005  # the least share of the light the lobes render for the fit to be made again
+MIN_HIGHLIGHT_SHARE = 0.005  # the least share of the light the lobes render for the fit to be made again,
+MIN_BOUNCE_SHARE = 0.05      # or the bounce of interreflection does
 GREY_SPREAD = 1e-6      # chromaticities within this of one another: one material
 SWITCHES = ("skip_black", "censor_black", "hold_frame", "frame_held_first", "fit_colour",
             "turn_inside_out", "decline_inside_out",
@@ -195,8 +197,10 @@ class SelfCalibration:
             share, which one fit held light by light undoes only in part, is undone further;
             a round that would leave the lights more than ``max_flattening_deg`` nearer the view
             axis than the first guess is not kept, and none is made where the first fit's lobes
-            render under :data:`MIN_HIGHLIGHT_SHARE` of the light (a matte surface pins its
-            lights only through a uniform albedo, which real objects need not have). 1: one
+            render under :data:`MIN_HIGHLIGHT_SHARE` of the light and its bounce of
+            interreflection under :data:`MIN_BOUNCE_SHARE` (a matte surface that does not see
+            itself pins its lights only through a uniform albedo, which real objects need not
+            have; highlights and interreflections pin the bas-relief that shading leaves). 1: one
             fit (the default until 2026-12-07, noon). On the light benchmark 3 took the final
             lights from 5.13 / 6.33 / 7.46° to 4.63 / 5.33 / 6.67° under 96 / 20 / 12 lights,
             DiLiGenT's three from 1.96 / 2.82 / 3.08° to 1.68 / 2.06 / 2.19° (cat at 96 images
@@ -466,7 +470,8 @@ def fitted_again(subject: Subject, first_guess: Lights, fitted: Lights, verdict:
     more than ``settings.settle_deg`` on average, or diverges, or would leave them more than
     ``settings.max_flattening_deg`` nearer the view axis than ``first_guess`` (:func:`flattening`;
     that round's lights are not kept). None is made where the first fit's lobes render under
-    :data:`MIN_HIGHLIGHT_SHARE` of the light (its evidence's ``highlight_share``).
+    :data:`MIN_HIGHLIGHT_SHARE` of the light and its bounce of interreflection under
+    :data:`MIN_BOUNCE_SHARE` (its evidence's ``highlight_share`` and ``bounce_share``).
 
     Returns:
         The last lights kept and ``verdict`` (that of the first round, ``changed``) with the
@@ -476,10 +481,11 @@ def fitted_again(subject: Subject, first_guess: Lights, fitted: Lights, verdict:
     share = verdict.evidence.get("highlight_share")
     if share is None:                 # a half turn kept unfitted: its fit was declined
         return fitted, verdict
-    if share < MIN_HIGHLIGHT_SHARE:
+    bounce = verdict.evidence.get("bounce_share", 0.0)
+    if share < MIN_HIGHLIGHT_SHARE and bounce < MIN_BOUNCE_SHARE:
         return fitted, replace(verdict, reason=f"{verdict.reason}; not fitted again: its lobes render "
-                                               f"{100 * share:.2f} % of the light, too few highlights "
-                                               f"to pin the lights",
+                                               f"{100 * share:.2f} % of the light and its interreflections "
+                                               f"{100 * bounce:.1f} %, too little to pin the lights",
                                evidence={**verdict.evidence, "rounds": 1})
     each_round = replace(frame_held(settings), max_flattening_deg=None)
     made, stop = 1, f"{settings.rounds} fits in all"
